@@ -1,0 +1,103 @@
+"""Framework for composable contact laws (after LIGGGHTS' `pair gran` sub-models).
+
+A contact law is the composition of orthogonal sub-models, one per *kind*:
+
+==============  ===============================================================
+kind            contract of the generated ``wp.func``
+==============  ===============================================================
+``normal``      ``(c: ContactInput, p: array2d) -> (fn: float, stiffness: float)``
+                fn [N] along the normal, > 0 repulsive (damping included).
+``cohesion``    ``(c, p) -> float`` extra normal force [N] (< 0 attractive).
+``tangential``  ``(c, p, fn, spring: vec3) -> (ft: vec3, spring_new: vec3)``
+``rolling``     ``(c, p, fn, spring: vec3) -> (torque: vec3, spring_new: vec3)``
+==============  ===============================================================
+
+A sub-model declares its parameters (:class:`ParameterSpec`), whether it needs a history
+vector per contact, and its literature reference. Parameters are stored per world and per
+pair type (``pp`` particle-particle, ``pw`` particle-wall) in one table ``p[row, column]``
+with ``row = 2 * world + pair_type``; each declared parameter ``mu_s`` becomes the calibration
+names ``mu_s_pp`` and ``mu_s_pw``. Adding a physical effect is one module that subclasses
+:class:`SubModel` plus the :func:`register` decorator; calibration reads the declarations.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, ClassVar
+
+import warp as wp
+
+PAIR_TYPES = ("pp", "pw")
+KINDS = ("normal", "cohesion", "tangential", "rolling")
+
+
+@wp.struct
+class ContactInput:
+    """Geometry and kinematics of one contact, seen from sphere i (SI units)."""
+
+    normal: wp.vec3  # unit normal pointing from the partner towards sphere i
+    overlap: float  # normal overlap delta_n [m], > 0 in contact
+    v_rel: wp.vec3  # velocity of i's contact point minus the partner's [m/s]
+    w_rel: wp.vec3  # angular velocity of i minus the partner's [rad/s]
+    r_eff: float  # effective radius R* [m]
+    m_eff: float  # effective mass m* [kg]
+    e_eff: float  # effective Young's modulus E* [Pa]
+    g_eff: float  # effective shear modulus G* [Pa]
+    arm: float  # distance from i's sphere centre to the contact point [m]
+    i_eff: float  # effective moment of inertia 1/(1/I_i + 1/I_j) [kg m^2]
+    dt: float  # time step [s]
+    row: int  # parameter-table row = 2 * world + pair_type
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """A contact parameter declared by a sub-model (stored per world and per pair type)."""
+
+    name: str
+    unit: str
+    default: float
+    bounds: tuple[float, float]
+    description: str
+
+    def check(self, full_name: str, value: float) -> None:
+        lo, hi = self.bounds
+        if not (lo <= value <= hi):
+            from ..errors import ConfigError
+
+            raise ConfigError(f"contact parameter '{full_name}' = {value} outside its admissible range [{lo}, {hi}] {self.unit}")
+
+
+class SubModel:
+    """Base class of a contact sub-model. Subclasses set the class attributes and ``make``."""
+
+    kind: ClassVar[str]
+    name: ClassVar[str]
+    parameters: ClassVar[tuple[ParameterSpec, ...]] = ()
+    needs_history: ClassVar[bool] = False
+    reference: ClassVar[str] = ""
+
+    def make(self, column: Callable[[str], int]) -> "wp.Function":
+        """Return the ``wp.func`` implementing this sub-model.
+
+        Args:
+            column: maps a declared parameter name to its column in the parameter table;
+                use the returned int as a compile-time constant inside the function.
+        """
+        raise NotImplementedError
+
+
+REGISTRY: dict[str, dict[str, type[SubModel]]] = {k: {} for k in KINDS}
+
+
+def register(cls: type[SubModel]) -> type[SubModel]:
+    """Class decorator registering a sub-model under ``(cls.kind, cls.name)``."""
+    if cls.kind not in REGISTRY:
+        raise ValueError(f"unknown sub-model kind '{cls.kind}', expected one of {KINDS}")
+    if cls.name in REGISTRY[cls.kind]:
+        raise ValueError(f"a {cls.kind} sub-model named '{cls.name}' is already registered")
+    REGISTRY[cls.kind][cls.name] = cls
+    return cls
+
+
+def available(kind: str) -> list[str]:
+    """Names of the registered sub-models of one kind."""
+    return sorted(REGISTRY[kind])

@@ -1,0 +1,505 @@
+"""Warp kernels of the engine: sphere placement, contact forces, body integration, wall motion.
+
+All kernels run unchanged on ``cpu`` and ``cuda``. Layout (see ``design`` notes in README):
+structure of arrays, body-major (the member spheres of a body are contiguous), one thread
+per sphere for contacts (full neighbour list: each pair is evaluated from both sides, so no
+atomics are needed for particle forces and results are deterministic), one thread per body
+for integration.
+"""
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from .contact.base import ContactInput
+from .contact.law import ContactLaw
+
+# Wall contacts of one wall whose normals agree within this cosine are one contact
+# (a sphere touching two triangles of a flat or gently curved face feels one force).
+WALL_MERGE_COS = 0.99
+# History of a wall contact is matched to last step's contact of the same wall if their
+# normals agree within this cosine.
+WALL_MATCH_COS = 0.7
+
+
+# ----------------------------------------------------------------------------- geometry
+@wp.func
+def closest_point_triangle(p: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3):
+    """Closest point to p on triangle abc (Ericson 2005, Real-Time Collision Detection, 5.1.5)."""
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = wp.dot(ab, ap)
+    d2 = wp.dot(ac, ap)
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a
+    bp = p - b
+    d3 = wp.dot(ab, bp)
+    d4 = wp.dot(ac, bp)
+    if d3 >= 0.0 and d4 <= d3:
+        return b
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        return a + ab * (d1 / (d1 - d3))
+    cp = p - c
+    d5 = wp.dot(ab, cp)
+    d6 = wp.dot(ac, cp)
+    if d6 >= 0.0 and d5 <= d6:
+        return c
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        return a + ac * (d2 / (d2 - d6))
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return a + ab * v + ac * w
+
+
+@wp.func
+def wall_motion_time(t: wp.float64, t_start: float, t_stop: float):
+    """Elapsed motion time tau = clamp(t, t_start, t_stop) - t_start [s] (float64)."""
+    ts = wp.float64(t_start)
+    te = wp.float64(t_stop)
+    return wp.min(wp.max(t, ts), te) - ts
+
+
+@wp.func
+def wall_is_moving(t: wp.float64, t_start: float, t_stop: float):
+    return t >= wp.float64(t_start) and t < wp.float64(t_stop)
+
+
+@wp.kernel
+def place_wall_vertices(
+    rest: wp.array(dtype=wp.vec3),
+    lin_vel: wp.vec3,
+    ang_vel: wp.vec3,
+    origin: wp.vec3,
+    t_start: float,
+    t_stop: float,
+    time: wp.array(dtype=wp.float64),
+    points: wp.array(dtype=wp.vec3),
+):
+    """x(t) = c + R(w tau)(x0 - c) + v tau  for a wall translating at v and rotating at w about c."""
+    i = wp.tid()
+    tau = wall_motion_time(time[0], t_start, t_stop)
+    w_len = wp.length(ang_vel)
+    x = rest[i] - origin
+    if w_len > 0.0:
+        angle = wp.float64(w_len) * tau
+        angle = angle - wp.float64(2.0 * wp.pi) * wp.floor(angle / wp.float64(2.0 * wp.pi))
+        q = wp.quat_from_axis_angle(ang_vel / w_len, float(angle))
+        x = wp.quat_rotate(q, x)
+    points[i] = origin + x + lin_vel * float(tau)
+
+
+# ----------------------------------------------------------------------------- bodies
+@wp.kernel
+def place_spheres(
+    sphere_body: wp.array(dtype=int),
+    sphere_offset: wp.array(dtype=wp.vec3),
+    body_q: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.quat),
+    sphere_x: wp.array(dtype=wp.vec3),
+):
+    """World position of each sphere from its body pose: x = X_b + R_b r_local."""
+    i = wp.tid()
+    b = sphere_body[i]
+    sphere_x[i] = body_q[b] + wp.quat_rotate(body_rot[b], sphere_offset[i])
+
+
+@wp.kernel
+def integrate_bodies(
+    body_first: wp.array(dtype=int),
+    body_count: wp.array(dtype=int),
+    body_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_world: wp.array(dtype=int),
+    sphere_f: wp.array(dtype=wp.vec3),
+    sphere_t: wp.array(dtype=wp.vec3),
+    external_f: wp.array(dtype=wp.vec3),
+    use_external: int,
+    gravity: wp.vec3,
+    dt: float,
+    active_in: wp.array(dtype=int),
+    q_in: wp.array(dtype=wp.vec3),
+    rot_in: wp.array(dtype=wp.quat),
+    v_in: wp.array(dtype=wp.vec3),
+    w_in: wp.array(dtype=wp.vec3),
+    active_out: wp.array(dtype=int),
+    q_out: wp.array(dtype=wp.vec3),
+    rot_out: wp.array(dtype=wp.quat),
+    v_out: wp.array(dtype=wp.vec3),
+    w_out: wp.array(dtype=wp.vec3),
+    bad: wp.array(dtype=int),
+):
+    """Semi-implicit (symplectic) Euler step of rigid bodies.
+
+    Translation: v' = v + (F/m + g) dt, x' = x + v' dt.
+    Rotation (asymmetric bodies): the world angular momentum L = R I R^T w is advanced by the
+    torque, L' = L + T dt (exactly conserved without torque); the quaternion is advanced with
+    the angular velocity w = R I^-1 R^T L' and renormalised; w' is recomputed from L' at the
+    new orientation so that the body frame and L stay consistent (cf. Rapaport 2004, The Art
+    of Molecular Dynamics Simulation, ch. 8; "NO_SQUISH"-style angular-momentum form).
+    Member forces are summed in a fixed order (no atomics: deterministic).
+    """
+    b = wp.tid()
+    act = active_in[b]
+    active_out[b] = act
+    if act == 0:
+        q_out[b] = q_in[b]
+        rot_out[b] = rot_in[b]
+        v_out[b] = wp.vec3(0.0)
+        w_out[b] = wp.vec3(0.0)
+        return
+    f = wp.vec3(0.0)
+    t = wp.vec3(0.0)
+    first = body_first[b]
+    for s in range(first, first + body_count[b]):
+        f = f + sphere_f[s]
+        t = t + sphere_t[s]
+    if use_external != 0:
+        f = f + external_f[b]
+    m = body_mass[b]
+    v = v_in[b] + (f / m + gravity) * dt
+    x = q_in[b] + v * dt
+    r = rot_in[b]
+    inertia = body_inertia[b]
+    w_body = wp.quat_rotate_inv(r, w_in[b])
+    l_world = wp.quat_rotate(r, wp.cw_mul(inertia, w_body)) + t * dt
+    w_mid = wp.quat_rotate(r, wp.cw_div(wp.quat_rotate_inv(r, l_world), inertia))
+    dq = wp.quat(w_mid[0], w_mid[1], w_mid[2], 0.0) * r
+    r_new = wp.normalize(r + dq * (0.5 * dt))
+    w_new = wp.quat_rotate(r_new, wp.cw_div(wp.quat_rotate_inv(r_new, l_world), inertia))
+    if not (wp.isfinite(x) and wp.isfinite(v) and wp.isfinite(w_new)):
+        wp.atomic_add(bad, 0, 1)
+    q_out[b] = x
+    rot_out[b] = r_new
+    v_out[b] = v
+    w_out[b] = w_new
+
+
+@wp.kernel
+def advance_time(time_in: wp.array(dtype=wp.float64), dt: float, time_out: wp.array(dtype=wp.float64)):
+    time_out[0] = time_in[0] + wp.float64(dt)
+
+
+@wp.kernel
+def deactivate_outside(
+    body_q: wp.array(dtype=wp.vec3),
+    lower: wp.vec3,
+    upper: wp.vec3,
+    active: wp.array(dtype=int),
+    removed: wp.array(dtype=int),
+):
+    """Remove (deactivate) bodies whose centre leaves the box [lower, upper]; counts removals."""
+    b = wp.tid()
+    if active[b] == 0:
+        return
+    x = body_q[b]
+    if x[0] < lower[0] or x[1] < lower[1] or x[2] < lower[2] or x[0] > upper[0] or x[1] > upper[1] or x[2] > upper[2]:
+        active[b] = 0
+        wp.atomic_add(removed, 0, 1)
+
+
+# ----------------------------------------------------------------------------- contacts
+@functools.lru_cache(maxsize=None)
+def contact_kernel(law: ContactLaw):
+    """Build (and cache) the contact kernel of one contact law.
+
+    The sub-models' ``wp.func``s are compiled into a single kernel; a sub-model that is
+    ``none`` compiles to nothing. One thread per sphere: (1) collect wall contacts (closest
+    feature per triangle from the BVH, merged across triangles whose contact normals agree),
+    (2) particle contacts from the grouped hash grid (never across worlds), (3) look up each
+    contact's history in last step's slots, evaluate the law, write this step's slots.
+    """
+    normal_f = law.submodels["normal"].make(law.column)
+    cohesion_f = law.submodels["cohesion"].make(law.column)
+    tangential_f = law.submodels["tangential"].make(law.column)
+    rolling_f = law.submodels["rolling"].make(law.column)
+    track_wear = bool(law.track_wear)
+    roll_hist = bool(law.needs_rolling_history)
+
+    @wp.func
+    def evaluate(c: ContactInput, p: wp.array2d(dtype=float), spring: wp.vec3, roll: wp.vec3):
+        fn, s_n = normal_f(c, p)
+        fn = fn + cohesion_f(c, p)
+        ft, spring_new = tangential_f(c, p, fn, spring)
+        tr, roll_new = rolling_f(c, p, fn, roll)
+        return fn, ft, tr, spring_new, roll_new
+
+    @wp.kernel
+    def contacts(
+        grid: wp.uint64,
+        sphere_body: wp.array(dtype=int),
+        sphere_radius: wp.array(dtype=float),
+        sphere_material: wp.array(dtype=int),
+        sphere_world: wp.array(dtype=int),
+        sphere_x: wp.array(dtype=wp.vec3),
+        body_mass: wp.array(dtype=float),
+        body_inertia: wp.array(dtype=wp.vec3),
+        body_active: wp.array(dtype=int),
+        body_q: wp.array(dtype=wp.vec3),
+        body_v: wp.array(dtype=wp.vec3),
+        body_w: wp.array(dtype=wp.vec3),
+        mat_e: wp.array(dtype=float),
+        mat_nu: wp.array(dtype=float),
+        params: wp.array2d(dtype=float),
+        max_radius: float,
+        wall_mesh: wp.array(dtype=wp.uint64),
+        wall_world: wp.array(dtype=int),
+        wall_material: wp.array(dtype=int),
+        wall_tri_offset: wp.array(dtype=int),
+        wall_lin_vel: wp.array(dtype=wp.vec3),
+        wall_ang_vel: wp.array(dtype=wp.vec3),
+        wall_origin: wp.array(dtype=wp.vec3),
+        wall_t_start: wp.array(dtype=float),
+        wall_t_stop: wp.array(dtype=float),
+        num_walls: int,
+        total_tris: int,
+        time: wp.array(dtype=wp.float64),
+        dt: float,
+        max_contacts: int,
+        count_in: wp.array(dtype=int),
+        partner_in: wp.array(dtype=int),
+        spring_in: wp.array(dtype=wp.vec3),
+        roll_in: wp.array(dtype=wp.vec3),
+        wnormal_in: wp.array(dtype=wp.vec3),
+        count_out: wp.array(dtype=int),
+        partner_out: wp.array(dtype=int),
+        spring_out: wp.array(dtype=wp.vec3),
+        roll_out: wp.array(dtype=wp.vec3),
+        wnormal_out: wp.array(dtype=wp.vec3),
+        slot_point: wp.array(dtype=wp.vec3),
+        slot_depth: wp.array(dtype=float),
+        slot_tri: wp.array(dtype=int),
+        sphere_f: wp.array(dtype=wp.vec3),
+        sphere_t: wp.array(dtype=wp.vec3),
+        wear_energy_n: wp.array(dtype=float),
+        wear_energy_t: wp.array(dtype=float),
+        wear_impulse_n: wp.array(dtype=float),
+        wear_impulse_t: wp.array(dtype=float),
+        overflow: wp.array(dtype=int),
+    ):
+        i = wp.tid()
+        base = i * max_contacts
+        b = sphere_body[i]
+        if body_active[b] == 0:
+            count_out[i] = 0
+            sphere_f[i] = wp.vec3(0.0)
+            sphere_t[i] = wp.vec3(0.0)
+            return
+        world = sphere_world[i]
+        xi = sphere_x[i]
+        ri = sphere_radius[i]
+        mi = sphere_material[i]
+        xb = body_q[b]
+        vb = body_v[b]
+        wb = body_w[b]
+        mb = body_mass[b]
+        ib = body_inertia[b]
+        ib_mean = (ib[0] + ib[1] + ib[2]) / 3.0
+        e_i = mat_e[mi]
+        nu_i = mat_nu[mi]
+        g_i = e_i / (2.0 * (1.0 + nu_i))
+        n_old = count_in[i]
+        n_new = int(0)
+        f_sum = wp.vec3(0.0)
+        t_sum = wp.vec3(0.0)
+        t_now = time[0]
+
+        # ---- (1) wall contacts: collect, merging triangles whose normals agree
+        for k in range(num_walls):
+            ww = wall_world[k]
+            if ww >= 0 and ww != world:
+                continue
+            mesh = wall_mesh[k]
+            tag = -(k + 1)
+            ext = wp.vec3(ri, ri, ri)
+            mquery = wp.mesh_query_aabb(mesh, xi - ext, xi + ext)
+            tri = int(0)
+            while wp.mesh_query_aabb_next(mquery, tri):
+                m = wp.mesh_get(mesh)
+                pa = m.points[m.indices[3 * tri + 0]]
+                pb = m.points[m.indices[3 * tri + 1]]
+                pc = m.points[m.indices[3 * tri + 2]]
+                cp = closest_point_triangle(xi, pa, pb, pc)
+                d = xi - cp
+                dist = wp.length(d)
+                if dist >= ri or dist < 1.0e-12:
+                    continue
+                nrm = d / dist
+                depth = ri - dist
+                merged = int(0)
+                for s in range(n_new):
+                    if partner_out[base + s] == tag:
+                        if wp.dot(wnormal_out[base + s], nrm) > WALL_MERGE_COS:
+                            merged = 1
+                            if depth > slot_depth[base + s]:
+                                slot_depth[base + s] = depth
+                                slot_point[base + s] = cp
+                                slot_tri[base + s] = tri
+                                wnormal_out[base + s] = nrm
+                if merged == 0:
+                    if n_new < max_contacts:
+                        partner_out[base + n_new] = tag
+                        wnormal_out[base + n_new] = nrm
+                        slot_depth[base + n_new] = depth
+                        slot_point[base + n_new] = cp
+                        slot_tri[base + n_new] = tri
+                        n_new += 1
+                    else:
+                        wp.atomic_add(overflow, 0, 1)
+
+        # ---- (1b) wall contact forces
+        for s in range(n_new):
+            tag = partner_out[base + s]
+            kw = -tag - 1
+            nrm = wnormal_out[base + s]
+            cp = slot_point[base + s]
+            depth = slot_depth[base + s]
+            spring = wp.vec3(0.0)
+            roll = wp.vec3(0.0)
+            for o in range(n_old):
+                if partner_in[base + o] == tag:
+                    if wp.dot(wnormal_in[base + o], nrm) > WALL_MATCH_COS:
+                        spring = spring_in[base + o]
+                        if wp.static(roll_hist):
+                            roll = roll_in[base + o]
+            # wall kinematics at the contact point
+            v_wall = wp.vec3(0.0)
+            w_wall = wp.vec3(0.0)
+            if wall_is_moving(t_now, wall_t_start[kw], wall_t_stop[kw]):
+                tau = wall_motion_time(t_now, wall_t_start[kw], wall_t_stop[kw])
+                centre = wall_origin[kw] + wall_lin_vel[kw] * float(tau)
+                w_wall = wall_ang_vel[kw]
+                v_wall = wall_lin_vel[kw] + wp.cross(w_wall, cp - centre)
+            mw = wall_material[kw]
+            e_w = mat_e[mw]
+            nu_w = mat_nu[mw]
+            g_w = e_w / (2.0 * (1.0 + nu_w))
+            c = ContactInput()
+            c.normal = nrm
+            c.overlap = depth
+            c.v_rel = vb + wp.cross(wb, cp - xb) - v_wall
+            c.w_rel = wb - w_wall
+            c.r_eff = ri
+            c.m_eff = mb
+            c.e_eff = 1.0 / ((1.0 - nu_i * nu_i) / e_i + (1.0 - nu_w * nu_w) / e_w)
+            c.g_eff = 1.0 / ((2.0 - nu_i) / g_i + (2.0 - nu_w) / g_w)
+            c.arm = ri - depth
+            c.i_eff = ib_mean
+            c.dt = dt
+            c.row = 2 * world + 1
+            fn, ft, tr, spring_new, roll_new = evaluate(c, params, spring, roll)
+            force = fn * nrm + ft
+            f_sum = f_sum + force
+            t_sum = t_sum + wp.cross(cp - xb, force) + tr
+            spring_out[base + s] = spring_new
+            if wp.static(roll_hist):
+                roll_out[base + s] = roll_new
+            if wp.static(track_wear):
+                # relative wear model: accumulated |F_n . v_n| dt and |F_t . v_t| dt per triangle
+                v_n = wp.dot(c.v_rel, nrm)
+                v_t = c.v_rel - v_n * nrm
+                idx = world * total_tris + wall_tri_offset[kw] + slot_tri[base + s]
+                wp.atomic_add(wear_energy_n, idx, wp.abs(fn * v_n) * dt)
+                wp.atomic_add(wear_energy_t, idx, wp.abs(wp.dot(ft, v_t)) * dt)
+                wp.atomic_add(wear_impulse_n, idx, wp.abs(fn) * dt)
+                wp.atomic_add(wear_impulse_t, idx, wp.length(ft) * dt)
+
+        # ---- (2) particle contacts (grouped hash grid: same world only)
+        gquery = wp.hash_grid_query(grid, xi, ri + max_radius, world)
+        j = int(0)
+        while wp.hash_grid_query_next(gquery, j):
+            if j == i:
+                continue
+            bj = sphere_body[j]
+            if bj == b:
+                continue
+            if body_active[bj] == 0:
+                continue
+            d = xi - sphere_x[j]
+            rj = sphere_radius[j]
+            rr = ri + rj
+            dist2 = wp.dot(d, d)
+            if dist2 >= rr * rr:
+                continue
+            if n_new >= max_contacts:
+                wp.atomic_add(overflow, 0, 1)
+                continue
+            dist = wp.sqrt(dist2)
+            nrm = wp.vec3(0.0, 0.0, 1.0)
+            if dist > 1.0e-12:
+                nrm = d / dist
+            overlap = rr - dist
+            spring = wp.vec3(0.0)
+            roll = wp.vec3(0.0)
+            for o in range(n_old):
+                if partner_in[base + o] == j:
+                    spring = spring_in[base + o]
+                    if wp.static(roll_hist):
+                        roll = roll_in[base + o]
+            arm_i = ri - 0.5 * overlap
+            cp = xi - arm_i * nrm
+            xbj = body_q[bj]
+            vbj = body_v[bj]
+            wbj = body_w[bj]
+            mbj = body_mass[bj]
+            ibj = body_inertia[bj]
+            ibj_mean = (ibj[0] + ibj[1] + ibj[2]) / 3.0
+            mj = sphere_material[j]
+            e_j = mat_e[mj]
+            nu_j = mat_nu[mj]
+            g_j = e_j / (2.0 * (1.0 + nu_j))
+            c = ContactInput()
+            c.normal = nrm
+            c.overlap = overlap
+            c.v_rel = (vb + wp.cross(wb, cp - xb)) - (vbj + wp.cross(wbj, cp - xbj))
+            c.w_rel = wb - wbj
+            c.r_eff = ri * rj / rr
+            c.m_eff = mb * mbj / (mb + mbj)
+            c.e_eff = 1.0 / ((1.0 - nu_i * nu_i) / e_i + (1.0 - nu_j * nu_j) / e_j)
+            c.g_eff = 1.0 / ((2.0 - nu_i) / g_i + (2.0 - nu_j) / g_j)
+            c.arm = arm_i
+            c.i_eff = ib_mean * ibj_mean / (ib_mean + ibj_mean)
+            c.dt = dt
+            c.row = 2 * world
+            fn, ft, tr, spring_new, roll_new = evaluate(c, params, spring, roll)
+            force = fn * nrm + ft
+            f_sum = f_sum + force
+            t_sum = t_sum + wp.cross(cp - xb, force) + tr
+            partner_out[base + n_new] = j
+            spring_out[base + n_new] = spring_new
+            if wp.static(roll_hist):
+                roll_out[base + n_new] = roll_new
+            n_new += 1
+
+        count_out[i] = n_new
+        sphere_f[i] = f_sum
+        sphere_t[i] = t_sum
+
+    return contacts
+
+
+@wp.kernel
+def kinetic_energy(
+    body_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_world: wp.array(dtype=int),
+    active: wp.array(dtype=int),
+    rot: wp.array(dtype=wp.quat),
+    v: wp.array(dtype=wp.vec3),
+    w: wp.array(dtype=wp.vec3),
+    ke_world: wp.array(dtype=float),
+):
+    """Translational + rotational kinetic energy summed per world [J]."""
+    b = wp.tid()
+    if active[b] == 0:
+        return
+    wb = wp.quat_rotate_inv(rot[b], w[b])
+    e = 0.5 * body_mass[b] * wp.dot(v[b], v[b]) + 0.5 * wp.dot(wb, wp.cw_mul(body_inertia[b], wb))
+    wp.atomic_add(ke_world, body_world[b], e)

@@ -1,0 +1,279 @@
+"""DEM solver (``step(state_in, state_out, dt)``) and a thin ``Simulation`` driver."""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+import warp as wp
+
+from . import kernels
+from .errors import ContactOverflowError, StabilityError
+from .model import Model, State
+from .timestep import TimeStepLimits, check_time_step
+
+
+class WallStats:
+    """Per-triangle, per-world wall accumulators (relative wear model).
+
+    ``energy_n``/``energy_t``: accumulated normal / tangential contact energy
+    sum |F_n . v_n| dt, sum |F_t . v_t| dt [J]; ``impulse_n``/``impulse_t``: sum |F| dt [N s].
+    Arrays have shape (num_worlds * total_triangles,), index = world * T + triangle.
+    """
+
+    FIELDS = ("energy_n", "energy_t", "impulse_n", "impulse_t")
+
+    def __init__(self, model: Model) -> None:
+        n = max(model.num_worlds * model.total_triangles, 1)
+        for f in self.FIELDS:
+            setattr(self, f, wp.zeros(n, dtype=float, device=model.device))
+        self.model = model
+
+    def zero(self) -> None:
+        for f in self.FIELDS:
+            getattr(self, f).zero_()
+
+    def per_triangle(self, field: str, wall: int | None = None) -> np.ndarray:
+        """(num_worlds, T_wall) array of one accumulator, for one wall or all walls."""
+        m = self.model
+        a = getattr(self, field).numpy()[: m.num_worlds * m.total_triangles].reshape(m.num_worlds, m.total_triangles)
+        if wall is None:
+            return a
+        w = m.walls[wall]
+        return a[:, w.tri_offset: w.tri_offset + w.num_triangles]
+
+    def per_component(self, field: str, wall: int) -> dict[str, np.ndarray]:
+        """Sum of one accumulator over each labelled component of a wall, per world."""
+        w = self.model.walls[wall]
+        tri = self.per_triangle(field, wall)
+        if w.triangle_labels is None:
+            return {w.name: tri.sum(axis=1)}
+        out = {}
+        for lab in np.unique(w.triangle_labels):
+            name = w.label_names[lab] if lab < len(w.label_names) else f"{w.name}:{lab}"
+            out[name] = tri[:, w.triangle_labels == lab].sum(axis=1)
+        return out
+
+
+class DEMSolver:
+    """Explicit DEM solver for a :class:`Model`.
+
+    Each step: place moving walls at t and refit their BVH; place member spheres from body
+    poses; rebuild the grouped hash grid (one group per world); evaluate contacts (one
+    thread per sphere, full neighbour list with per-sphere history slots); integrate bodies
+    (semi-implicit Euler); advance time. Nothing is copied to the host inside a step.
+
+    Args:
+        model: the model.
+        dt: time step [s], checked against :func:`~warpdem.timestep.check_time_step`.
+        v_ref: largest expected impact speed for the stability check [m/s].
+        force: accept a step above the stability limit.
+    """
+
+    def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False) -> None:
+        self.model = model
+        self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
+        self.dt = float(dt)
+        d = model.device
+        n = model.num_spheres
+        k = model.max_contacts
+        self.sphere_f = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.sphere_t = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.slot_point = wp.zeros(n * k, dtype=wp.vec3, device=d)
+        self.slot_depth = wp.zeros(n * k, dtype=float, device=d)
+        self.slot_tri = wp.zeros(n * k, dtype=int, device=d)
+        self.overflow = wp.zeros(1, dtype=int, device=d)
+        self.bad = wp.zeros(1, dtype=int, device=d)
+        self.external_force = wp.zeros(model.num_bodies, dtype=wp.vec3, device=d)
+        self.use_external_force = False
+        self.wall_stats = WallStats(model)
+        dim = int(min(256, max(16, round((2.0 * n) ** (1.0 / 3.0)))))
+        self.grid = wp.HashGrid(dim, dim, dim, device=d)
+        self.cell_size = 2.0 * model.max_radius
+        self.kernel = kernels.contact_kernel(model.contact_law)
+        self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
+
+    # ---------------------------------------------------------------- step
+    def step(self, state_in: State, state_out: State, dt: float | None = None) -> None:
+        """Advance ``state_in`` by ``dt`` into ``state_out`` (must be distinct States)."""
+        m = self.model
+        dt = self.dt if dt is None else float(dt)
+        d = m.device
+        for i in self.moving_walls:
+            w = m.walls[i]
+            wp.launch(kernels.place_wall_vertices, dim=len(w.vertices),
+                      inputs=[w.rest_points, wp.vec3(*w.motion.velocity), wp.vec3(*w.motion.angular_velocity),
+                              wp.vec3(*w.motion.origin), float(w.motion.start), float(min(w.motion.stop, 3.0e38)),
+                              state_in.time, w.mesh.points], device=d)
+            w.mesh.refit()
+        wp.launch(kernels.place_spheres, dim=m.num_spheres,
+                  inputs=[m.sphere_body, m.sphere_offset, state_in.body_q, state_in.body_rot, state_in.sphere_x], device=d)
+        self.grid.build(state_in.sphere_x, self.cell_size, groups=m.sphere_world)
+        ws = self.wall_stats
+        wp.launch(self.kernel, dim=m.num_spheres, inputs=[
+            self.grid.id, m.sphere_body, m.sphere_radius, m.sphere_material, m.sphere_world, state_in.sphere_x,
+            m.body_mass, m.body_inertia, state_in.body_active, state_in.body_q, state_in.body_v, state_in.body_w,
+            m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
+            m.wall_mesh, m.wall_world, m.wall_material, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel,
+            m.wall_origin, m.wall_t_start, m.wall_t_stop, len(m.walls), m.total_triangles, state_in.time, dt,
+            m.max_contacts,
+            state_in.contact_count, state_in.contact_partner, state_in.contact_spring, state_in.contact_roll,
+            state_in.contact_wnormal,
+            state_out.contact_count, state_out.contact_partner, state_out.contact_spring, state_out.contact_roll,
+            state_out.contact_wnormal,
+            self.slot_point, self.slot_depth, self.slot_tri, self.sphere_f, self.sphere_t,
+            ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.overflow], device=d)
+        wp.launch(kernels.integrate_bodies, dim=m.num_bodies, inputs=[
+            m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
+            self.external_force, int(self.use_external_force), wp.vec3(*m.gravity), dt,
+            state_in.body_active, state_in.body_q, state_in.body_rot, state_in.body_v, state_in.body_w,
+            state_out.body_active, state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
+            self.bad], device=d)
+        wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
+
+    # ---------------------------------------------------------------- checks
+    def check(self) -> None:
+        """Raise if a contact slot overflowed or a state became non-finite since the last check."""
+        ov = int(self.overflow.numpy()[0])
+        bad = int(self.bad.numpy()[0])
+        if ov:
+            self.overflow.zero_()
+            raise ContactOverflowError(
+                f"{ov} contact(s) did not fit the {self.model.max_contacts} slots per sphere and would have been "
+                f"dropped; build the model with a larger max_contacts")
+        if bad:
+            self.bad.zero_()
+            raise StabilityError(
+                f"{bad} body state(s) became NaN/inf: the time step {self.dt:.3g} s is too large for these "
+                f"contacts, or the start had a huge overlap (limit {self.limits.limit:.3g} s)")
+
+
+class Simulation:
+    """Owns two States and a solver; runs many steps with periodic checks.
+
+    On CUDA the inner loop is captured once in a CUDA graph (``steps_per_graph`` steps,
+    even so that the state parity is preserved) and replayed.
+    """
+
+    def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
+                 use_graph: bool | None = None, steps_per_graph: int = 20) -> None:
+        self.model = model
+        self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force)
+        self.state = model.state()
+        self._next = model.state()
+        self.steps = 0
+        self.use_graph = model.device.is_cuda if use_graph is None else bool(use_graph)
+        self.steps_per_graph = max(2, steps_per_graph + (steps_per_graph % 2))
+        self._graph = None
+
+    @property
+    def dt(self) -> float:
+        return self.solver.dt
+
+    @property
+    def time(self) -> float:
+        return self.state.sim_time
+
+    def _step_pair(self, n: int) -> None:
+        for _ in range(n):
+            self.solver.step(self.state, self._next)
+            self.state, self._next = self._next, self.state
+
+    def invalidate_graph(self) -> None:
+        """Call after replacing model arrays that a captured graph refers to."""
+        self._graph = None
+
+    def run(self, steps: int, check_every: int = 1000, callback: Callable[["Simulation"], None] | None = None,
+            callback_every: int = 0, progress: bool = False) -> None:
+        """Advance ``steps`` steps. ``callback(sim)`` runs every ``callback_every`` steps."""
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=steps, unit="step", desc="DEM")
+        done = 0
+        chunk_limit = min(x for x in (check_every, callback_every or check_every) if x > 0)
+        while done < steps:
+            n = min(chunk_limit, steps - done)
+            if callback_every:
+                n = min(n, callback_every - (self.steps % callback_every))
+            self._advance(n)
+            done += n
+            if bar is not None:
+                bar.update(n)
+            if self.steps % check_every == 0 or done == steps:
+                self.solver.check()
+            if callback_every and self.steps % callback_every == 0 and callback is not None:
+                callback(self)
+        if bar is not None:
+            bar.close()
+
+    def _advance(self, n: int) -> None:
+        if not self.use_graph or n < self.steps_per_graph:
+            self._step_pair(n)
+            self.steps += n
+            return
+        if self._graph is None:
+            self._step_pair(2)  # warm-up: allocations happen outside the capture
+            self.steps += 2
+            n -= 2
+            a, b = self.state, self._next
+            with wp.ScopedCapture(device=self.model.device) as cap:
+                for _ in range(self.steps_per_graph // 2):
+                    self.solver.step(a, b)
+                    self.solver.step(b, a)
+            self._graph = (cap.graph, a)
+        graph, a = self._graph
+        if self.state is not a:  # keep parity with the captured buffers
+            self._step_pair(1)
+            self.steps += 1
+            n -= 1
+        reps, rest = divmod(n, self.steps_per_graph)
+        for _ in range(reps):
+            wp.capture_launch(graph)
+        self.steps += reps * self.steps_per_graph
+        self._step_pair(rest)
+        self.steps += rest
+
+    # ---------------------------------------------------------------- read-back
+    def kinetic_energy(self) -> np.ndarray:
+        """Kinetic energy per world [J]."""
+        m = self.model
+        ke = wp.zeros(m.num_worlds, dtype=float, device=m.device)
+        s = self.state
+        wp.launch(kernels.kinetic_energy, dim=m.num_bodies,
+                  inputs=[m.body_mass, m.body_inertia, m.body_world, s.body_active, s.body_rot, s.body_v, s.body_w, ke],
+                  device=m.device)
+        return ke.numpy().astype(np.float64)
+
+    def sphere_positions(self) -> np.ndarray:
+        """World positions of all spheres at the current state (n, 3) [m]."""
+        m = self.model
+        s = self.state
+        wp.launch(kernels.place_spheres, dim=m.num_spheres,
+                  inputs=[m.sphere_body, m.sphere_offset, s.body_q, s.body_rot, s.sphere_x], device=m.device)
+        return s.sphere_x.numpy().astype(np.float64)
+
+    def remove_outside(self, lower, upper) -> int:
+        """Deactivate bodies whose centre is outside the box; returns how many were removed now."""
+        m = self.model
+        removed = wp.zeros(1, dtype=int, device=m.device)
+        wp.launch(kernels.deactivate_outside, dim=m.num_bodies,
+                  inputs=[self.state.body_q, wp.vec3(*lower), wp.vec3(*upper), self.state.body_active, removed],
+                  device=m.device)
+        return int(removed.numpy()[0])
+
+    def settle(self, ke_per_particle: float = 1.0e-6, max_time: float = 1.5, check_interval: float = 0.01,
+               min_time: float = 0.0) -> float:
+        """Run until the mean kinetic energy per active body of every world is below
+        ``ke_per_particle`` [J] or ``max_time`` [s] of simulated time passed; returns the time spent."""
+        t0 = self.time
+        n = max(1, int(round(check_interval / self.dt)))
+        while True:
+            self.run(n, check_every=n)
+            elapsed = self.time - t0
+            active = np.bincount(self.model.host["body_world"], weights=self.state.body_active.numpy(),
+                                 minlength=self.model.num_worlds)
+            ke = self.kinetic_energy() / np.maximum(active, 1)
+            if (elapsed >= min_time and np.all(ke < ke_per_particle)) or elapsed >= max_time:
+                return elapsed
