@@ -17,10 +17,12 @@ from .contact.law import ContactLaw
 
 # Wall contacts of one wall whose normals agree within this cosine are one contact
 # (a sphere touching two triangles of a flat or gently curved face feels one force).
-WALL_MERGE_COS = 0.99
+WALL_MERGE_COS = wp.constant(0.99)
 # History of a wall contact is matched to last step's contact of the same wall if their
 # normals agree within this cosine.
-WALL_MATCH_COS = 0.7
+WALL_MATCH_COS = wp.constant(0.7)
+# Marks a wall slot dropped during collection (never a sphere index or wall tag).
+SLOT_EMPTY = wp.constant(-2147483647)
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -333,17 +335,34 @@ def contact_kernel(law: ContactLaw):
                     continue
                 nrm = d / dist
                 depth = ri - dist
-                merged = int(0)
+                # A candidate and a collected contact describe one contact if their normals
+                # agree, or if the shallower one's contact point lies on (or behind) the
+                # deeper one's tangent plane: an edge/vertex of a neighbouring triangle
+                # touched "through" a face the sphere already presses on (coplanar or
+                # convex neighbours). The deeper one is kept. Concave corners (floor and
+                # side wall) stick out of each other's planes and stay two contacts.
+                keep = int(1)
+                tol = 1.0e-3 * ri
                 for s in range(n_new):
-                    if partner_out[base + s] == tag:
-                        if wp.dot(wnormal_out[base + s], nrm) > WALL_MERGE_COS:
-                            merged = 1
-                            if depth > slot_depth[base + s]:
-                                slot_depth[base + s] = depth
-                                slot_point[base + s] = cp
-                                slot_tri[base + s] = tri
-                                wnormal_out[base + s] = nrm
-                if merged == 0:
+                    tag_s = partner_out[base + s]
+                    if tag_s == SLOT_EMPTY:
+                        continue
+                    n_s = wnormal_out[base + s]
+                    p_s = slot_point[base + s]
+                    d_s = slot_depth[base + s]
+                    related = int(0)
+                    if wp.dot(n_s, nrm) > WALL_MERGE_COS:
+                        related = 1
+                    if d_s >= depth and wp.dot(cp - p_s, n_s) <= tol:
+                        related = 1
+                    if depth > d_s and wp.dot(p_s - cp, nrm) <= tol:
+                        related = 1
+                    if related == 1:
+                        if d_s >= depth:
+                            keep = 0
+                        else:
+                            partner_out[base + s] = SLOT_EMPTY
+                if keep == 1:
                     if n_new < max_contacts:
                         partner_out[base + n_new] = tag
                         wnormal_out[base + n_new] = nrm
@@ -353,6 +372,18 @@ def contact_kernel(law: ContactLaw):
                         n_new += 1
                     else:
                         wp.atomic_add(overflow, 0, 1)
+        # compact the wall slots (drop the ones replaced by deeper related contacts)
+        n_kept = int(0)
+        for s in range(n_new):
+            if partner_out[base + s] != SLOT_EMPTY:
+                if n_kept != s:
+                    partner_out[base + n_kept] = partner_out[base + s]
+                    wnormal_out[base + n_kept] = wnormal_out[base + s]
+                    slot_depth[base + n_kept] = slot_depth[base + s]
+                    slot_point[base + n_kept] = slot_point[base + s]
+                    slot_tri[base + n_kept] = slot_tri[base + s]
+                n_kept += 1
+        n_new = n_kept
 
         # ---- (1b) wall contact forces
         for s in range(n_new):

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 from scipy.optimize import minimize
+from scipy.spatial import cKDTree
 
 from .clump_geometry import ClumpTemplate, make_template
 from .errors import ConfigError
@@ -167,29 +168,26 @@ def _sample(mesh: trimesh.Trimesh, n_points: int, rng: np.random.Generator, pad:
 # ----------------------------------------------------------------------------------------
 # greedy medial-axis seeding
 # ----------------------------------------------------------------------------------------
+def _sqdist(p: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(len(p), len(c)) squared distances via one matrix product."""
+    return np.maximum((p * p).sum(1)[:, None] + (c * c).sum(1)[None, :] - 2.0 * (p @ c.T), 0.0)
+
+
 def _greedy(cand: np.ndarray, crad: np.ndarray, pin: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Pick ``n`` candidate balls, each covering the most still-uncovered interior points."""
-    cand32, pin32 = cand.astype(np.float32), pin.astype(np.float32)
-    r2 = (crad.astype(np.float32)) ** 2
-    gain = np.zeros(len(cand), dtype=np.int64)
-    step = max(1, 4_000_000 // max(1, len(cand)))
-    for s in range(0, len(pin32), step):
-        d2 = ((pin32[s:s + step, None, :] - cand32[None]) ** 2).sum(-1)
-        gain += (d2 <= r2[None]).sum(0)
-    covered = np.zeros(len(pin32), dtype=bool)
+    cover = _sqdist(pin, cand) <= (crad * crad)[None, :]      # (N_in, n_cand) bool
+    gain = cover.sum(0).astype(np.float64)
+    covered = np.zeros(len(pin), dtype=bool)
     chosen: list[int] = []
     for _ in range(n):
-        score = gain.astype(np.float64) + 1e-9 * crad        # ties: larger ball
+        score = gain + 1e-9 * crad                             # ties: larger ball
         if chosen:
             score[chosen] = -1.0
         j = int(np.argmax(score))
         chosen.append(j)
-        new = (~covered) & (((pin32 - cand32[j]) ** 2).sum(-1) <= r2[j])
+        new = cover[:, j] & ~covered
         if new.any():
-            q = pin32[new]
-            for s in range(0, len(q), step):
-                d2 = ((q[s:s + step, None, :] - cand32[None]) ** 2).sum(-1)
-                gain -= (d2 <= r2[None]).sum(0)
+            gain -= cover[new].sum(0)
             covered |= new
     idx = np.array(chosen)
     return cand[idx].copy(), crad[idx].copy()
@@ -198,40 +196,63 @@ def _greedy(cand: np.ndarray, crad: np.ndarray, pin: np.ndarray, n: int) -> tupl
 # ----------------------------------------------------------------------------------------
 # refinement: minimise the sampled symmetric difference
 # ----------------------------------------------------------------------------------------
-def _objective(x: np.ndarray, pts: np.ndarray, sgn: np.ndarray, w: float, eps: float, n: int):
-    """J = sum_k w [in_k (1 - s_k) + out_k s_k],  s_k = sigmoid(u_k / eps),  u_k = max_i (r_i - |p_k - c_i|)."""
+def _objective(x: np.ndarray, pts: np.ndarray, nbr: np.ndarray, sgn: np.ndarray, w: float, eps: float,
+               n: int, mu: float, v_target: float):
+    """Soft symmetric difference (+ optional volume penalty) and its gradient.
+
+    J = sum_k w [in_k (1 - s_k) + out_k s_k] + mu (V_s - V_R)^2 / V_R,
+    s_k = sigmoid(u_k / eps), u_k = max_i (r_i - |p_k - c_i|), V_s = sum_k w s_k.
+    The max runs over the K candidate spheres ``nbr[k]`` of each point (see ``_refine``).
+    """
     c = x[:3 * n].reshape(n, 3)
     r = x[3 * n:]
-    diff = pts[:, None, :] - c[None]                       # (N,n,3)
-    dist = np.sqrt((diff * diff).sum(-1)) + 1e-12
-    u_all = r[None] - dist
-    a = np.argmax(u_all, axis=1)
+    diff = pts[:, None, :] - c[nbr]                            # (N,K,3)
+    dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff)) + 1e-12
+    u_all = r[nbr] - dist
+    j = np.argmax(u_all, axis=1)
     rows = np.arange(len(pts))
-    u = u_all[rows, a]
-    z = np.clip(u / eps, -40, 40)
-    s = 1.0 / (1.0 + np.exp(-z))
-    # sgn = +1 outside, -1 inside:  J = const + sum w sgn s
-    J = w * float(np.sum(sgn * s))
-    g_u = w * sgn * s * (1.0 - s) / eps
+    a = nbr[rows, j]
+    u = u_all[rows, j]
+    s = 0.5 * (1.0 + np.tanh(0.5 * u / eps))                  # sigmoid, overflow-free
+    ds = s * (1.0 - s) / eps
+    J = w * float(np.dot(sgn, s))                              # sgn: +1 outside, -1 inside
+    g_u = w * sgn * ds
+    if mu > 0.0:
+        dv = w * float(s.sum()) - v_target
+        J += mu * dv * dv / v_target
+        g_u = g_u + (2.0 * mu * dv / v_target) * w * ds
     gr = np.bincount(a, weights=g_u, minlength=n)
-    unit = diff[rows, a] / dist[rows, a][:, None]           # d u / d c_a = (p - c_a)/|p - c_a|
-    gc = np.stack([np.bincount(a, weights=g_u * unit[:, k], minlength=n) for k in range(3)], axis=1)
+    coef = g_u / dist[rows, j]                                 # d u / d c_a = (p - c_a) / |p - c_a|
+    d = diff[rows, j]
+    gc = np.stack([np.bincount(a, weights=coef * d[:, k], minlength=n) for k in range(3)], axis=1)
     return J, np.concatenate([gc.ravel(), gr])
 
 
 def _refine(c: np.ndarray, r: np.ndarray, smp: _Samples, lo: np.ndarray, hi: np.ndarray,
-            r_min: float, r_max: float, iters: int) -> tuple[np.ndarray, np.ndarray]:
+            r_min: float, r_max: float, iters: int, mu: float, v_target: float,
+            k_nbr: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """L-BFGS-B on centres and radii; sigmoid width annealed 2h -> h -> h/2 (h: point spacing).
+
+    Each point only sees its ``k_nbr`` spheres of largest u, re-selected every ``iters/2``
+    iterations (exact unless spheres overtake each other within a restart).
+    """
     n = len(r)
     sgn = np.where(smp.inside, -1.0, 1.0)
-    # drop points far from every ball and far inside/outside nothing can change them much:
-    # keep all points, the cost is O(N n) per evaluation
+    pts = smp.points
+    p2 = (pts * pts).sum(1)
     x = np.concatenate([c.ravel(), r])
     bounds = [(lo[k % 3], hi[k % 3]) for k in range(3 * n)] + [(r_min, r_max)] * n
+    k_nbr = min(k_nbr, n)
     for eps_f in (2.0, 1.0, 0.5):
-        eps = eps_f * smp.spacing
-        res = minimize(_objective, x, args=(smp.points, sgn, smp.weight, eps, n), jac=True,
-                       method="L-BFGS-B", bounds=bounds, options={"maxiter": iters, "ftol": 1e-10, "gtol": 1e-10})
-        x = res.x
+        for _ in range(2):
+            cc = x[:3 * n].reshape(n, 3)
+            u_all = x[3 * n:][None, :] - np.sqrt(np.maximum(p2[:, None] + (cc * cc).sum(1)[None] - 2.0 * (pts @ cc.T), 0.0))
+            nbr = np.argpartition(-u_all, k_nbr - 1, axis=1)[:, :k_nbr] if k_nbr < n else \
+                np.broadcast_to(np.arange(n), (len(pts), n))
+            res = minimize(_objective, x, args=(pts, nbr, sgn, smp.weight, eps_f * smp.spacing, n, mu, v_target),
+                           jac=True, method="L-BFGS-B", bounds=bounds,
+                           options={"maxiter": max(1, iters // 2), "ftol": 1e-9, "gtol": 1e-9})
+            x = res.x
     return x[:3 * n].reshape(n, 3), x[3 * n:]
 
 
@@ -248,8 +269,8 @@ def _sampled_fractions(c: np.ndarray, r: np.ndarray, smp: _Samples, v_real: floa
 # public API
 # ----------------------------------------------------------------------------------------
 def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *, name: str = "clump",
-              n_points: int = 40_000, n_seeds: int = 3000, refine: bool = True, max_iter: int = 150,
-              seed: int = 0) -> tuple[ClumpTemplate, FillReport]:
+              n_points: int = 30_000, n_seeds: int = 1500, refine: bool = True, match_volume: bool = True,
+              volume_weight: float = 10.0, max_iter: int = 60, seed: int = 0) -> tuple[ClumpTemplate, FillReport]:
     """Fill a closed mesh [m] with ``n_spheres`` overlapping spheres ("fast multi-sphere" method).
 
     Args:
@@ -292,23 +313,24 @@ def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *,
     if len(inside_pts) < 10 * n:
         raise ConfigError(f"fill_mesh '{name}': only {len(inside_pts)} sample points inside the mesh; "
                           f"raise n_points")
-    # seeds: interior points with their inscribed-ball radius
+    # seeds: interior points with their inscribed-ball radius = distance to the surface,
+    # from a dense surface sample (over-estimates by ~ spacing^2 / (2 r); refined later)
+    surf = trimesh.sample.sample_surface(m, 20_000, seed=seed)[0]
     pick = rng.choice(len(inside_pts), size=min(n_seeds, len(inside_pts)), replace=False)
     cand = inside_pts[pick]
-    _, crad, _ = trimesh.proximity.closest_point(m, cand)
-    # greedy coverage on a thinned interior set (cost ~ N_in x n_seeds)
-    pin = inside_pts[rng.choice(len(inside_pts), size=min(8000, len(inside_pts)), replace=False)]
+    crad = cKDTree(surf).query(cand)[0]
+    pin = inside_pts[rng.choice(len(inside_pts), size=min(6000, len(inside_pts)), replace=False)]
     c, r = _greedy(cand, crad, pin, n)
 
     if refine:
         lo, hi = smp.points.min(0), smp.points.max(0)
         c, r = _refine(c, r, smp, lo, hi, r_min=0.5 * smp.spacing, r_max=2.0 * float(crad.max()),
-                       iters=max_iter)
+                       iters=max_iter, mu=(volume_weight if match_volume else 0.0), v_target=v_norm)
 
     outside, missing = _sampled_fractions(c, r, smp, v_norm)
     # largest protrusion out of the mesh surface (normalised units)
     _, dc, _ = trimesh.proximity.closest_point(m, c)
-    inside_c = trimesh.proximity.signed_distance(m, c) > 0
+    inside_c = m.contains(c)
     protr = float(np.max(np.where(inside_c, r - dc, r + dc)))
 
     centers = c * scale + origin

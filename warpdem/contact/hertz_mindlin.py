@@ -17,8 +17,9 @@ Sign convention: v_n = v_rel . n > 0 when separating, so with beta <= 0 the damp
 ``2 sqrt(5/6) beta sqrt(S_n m*) v_n`` opposes the normal motion.
 
 The tangential spring delta_t is the contact's history: it is rotated into the current
-tangent plane each step (magnitude kept) and, while sliding, reset to the value that carries
-exactly the Coulomb force (LIGGGHTS ``tangential_history``; Luding 2008, Granular Matter 10:235).
+tangent plane each step (magnitude kept). The Coulomb cap applies to the whole tangential
+force (spring plus damping); while sliding the spring is reset so that spring plus damping
+carry exactly mu F_n (Luding 2008, Granular Matter 10:235, eq. 21).
 """
 from __future__ import annotations
 
@@ -89,17 +90,16 @@ class MindlinTangential(SubModel):
                 s = s * (s_len / s_proj)
             s = s + v_t * c.dt
             s_t = 8.0 * c.g_eff * wp.sqrt(c.r_eff * c.overlap)
-            f_spring = -s_t * s
-            f_max = p[c.row, c_mu] * wp.max(fn, 0.0)
-            f_len = wp.length(f_spring)
-            if f_len > f_max:
-                # gross sliding: Coulomb force, spring reset to carry it exactly (eq. 8)
-                if f_len > 0.0:
-                    f_spring = f_spring * (f_max / f_len)
-                s = f_spring / (-wp.max(s_t, 1.0e-30))
-                return f_spring, s
             beta = restitution_beta(p[c.row, c_e])
             f_damp = 2.0 * SQRT_5_6 * beta * wp.sqrt(s_t * c.m_eff) * v_t
-            return f_spring + f_damp, s
+            f_t = -s_t * s + f_damp
+            f_max = p[c.row, c_mu] * wp.max(fn, 0.0)
+            f_len = wp.length(f_t)
+            if f_len > f_max:
+                # gross sliding: |F_t| = mu F_n (eq. 8); the spring is reset so that spring
+                # plus damping carry exactly the Coulomb force (Luding 2008, eq. 21)
+                f_t = f_t * (f_max / f_len)
+                s = (f_t - f_damp) / (-wp.max(s_t, 1.0e-30))
+            return f_t, s
 
         return mindlin_tangential

@@ -1,0 +1,6 @@
+import os
+
+import warp as wp
+
+wp.config.quiet = True
+os.environ.setdefault("MPLBACKEND", "Agg")
