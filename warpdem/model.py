@@ -97,7 +97,7 @@ class Model:
         self.contact_law = law
         self.max_contacts = int(max_contacts)
         self.gravity = tuple(float(g) for g in gravity)
-        self.num_worlds = int(host["num_worlds"])
+        self.num_worlds = int(np.asarray(host["num_worlds"]).ravel()[0])
         self.num_spheres = int(host["sphere_radius"].shape[0])
         self.num_bodies = int(host["body_mass"].shape[0])
         self.max_radius = float(host["sphere_radius"].max())

@@ -204,18 +204,18 @@ def _objective(x: np.ndarray, pts: np.ndarray, nbr: np.ndarray, sgn: np.ndarray,
     s_k = sigmoid(u_k / eps), u_k = max_i (r_i - |p_k - c_i|), V_s = sum_k w s_k.
     The max runs over the K candidate spheres ``nbr[k]`` of each point (see ``_refine``).
     """
-    c = x[:3 * n].reshape(n, 3)
-    r = x[3 * n:]
-    diff = pts[:, None, :] - c[nbr]                            # (N,K,3)
-    dist = np.sqrt(np.einsum("ijk,ijk->ij", diff, diff)) + 1e-12
+    cx, cy, cz, r = x[0:3 * n:3], x[1:3 * n:3], x[2:3 * n:3], x[3 * n:]
+    px, py, pz = pts                                           # (3, N) coordinate rows
+    dx, dy, dz = px[:, None] - cx[nbr], py[:, None] - cy[nbr], pz[:, None] - cz[nbr]   # (N,K)
+    dist = np.sqrt(dx * dx + dy * dy + dz * dz) + 1e-12
     u_all = r[nbr] - dist
     j = np.argmax(u_all, axis=1)
-    rows = np.arange(len(pts))
+    rows = np.arange(len(px))
     a = nbr[rows, j]
     u = u_all[rows, j]
     s = 0.5 * (1.0 + np.tanh(0.5 * u / eps))                  # sigmoid, overflow-free
     ds = s * (1.0 - s) / eps
-    J = w * float(np.dot(sgn, s))                              # sgn: +1 outside, -1 inside
+    J = w * float((sgn * s).sum())                             # sgn: +1 outside, -1 inside
     g_u = w * sgn * ds
     if mu > 0.0:
         dv = w * float(s.sum()) - v_target
@@ -223,8 +223,7 @@ def _objective(x: np.ndarray, pts: np.ndarray, nbr: np.ndarray, sgn: np.ndarray,
         g_u = g_u + (2.0 * mu * dv / v_target) * w * ds
     gr = np.bincount(a, weights=g_u, minlength=n)
     coef = g_u / dist[rows, j]                                 # d u / d c_a = (p - c_a) / |p - c_a|
-    d = diff[rows, j]
-    gc = np.stack([np.bincount(a, weights=coef * d[:, k], minlength=n) for k in range(3)], axis=1)
+    gc = np.stack([np.bincount(a, weights=coef * dd[rows, j], minlength=n) for dd in (dx, dy, dz)], axis=1)
     return J, np.concatenate([gc.ravel(), gr])
 
 
@@ -240,6 +239,7 @@ def _refine(c: np.ndarray, r: np.ndarray, smp: _Samples, lo: np.ndarray, hi: np.
     sgn = np.where(smp.inside, -1.0, 1.0)
     pts = smp.points
     p2 = (pts * pts).sum(1)
+    pts_t = np.ascontiguousarray(pts.T)
     x = np.concatenate([c.ravel(), r])
     bounds = [(lo[k % 3], hi[k % 3]) for k in range(3 * n)] + [(r_min, r_max)] * n
     k_nbr = min(k_nbr, n)
@@ -247,9 +247,9 @@ def _refine(c: np.ndarray, r: np.ndarray, smp: _Samples, lo: np.ndarray, hi: np.
         for _ in range(2):
             cc = x[:3 * n].reshape(n, 3)
             u_all = x[3 * n:][None, :] - np.sqrt(np.maximum(p2[:, None] + (cc * cc).sum(1)[None] - 2.0 * (pts @ cc.T), 0.0))
-            nbr = np.argpartition(-u_all, k_nbr - 1, axis=1)[:, :k_nbr] if k_nbr < n else \
-                np.broadcast_to(np.arange(n), (len(pts), n))
-            res = minimize(_objective, x, args=(pts, nbr, sgn, smp.weight, eps_f * smp.spacing, n, mu, v_target),
+            nbr = np.ascontiguousarray(np.argpartition(-u_all, k_nbr - 1, axis=1)[:, :k_nbr]) if k_nbr < n \
+                else np.ascontiguousarray(np.broadcast_to(np.arange(n), (len(pts), n)))
+            res = minimize(_objective, x, args=(pts_t, nbr, sgn, smp.weight, eps_f * smp.spacing, n, mu, v_target),
                            jac=True, method="L-BFGS-B", bounds=bounds,
                            options={"maxiter": max(1, iters // 2), "ftol": 1e-9, "gtol": 1e-9})
             x = res.x
