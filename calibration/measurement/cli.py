@@ -1,0 +1,184 @@
+"""``warpdem measure``: angle of repose from an image, a drum video or a
+measurement file; prints JSON and saves diagnostic pictures.
+
+Examples::
+
+    warpdem measure pile.png --scale 2.5 --window 0 300 0 160 --origin-px 40 610
+    warpdem measure drum.mp4 --rpm 30 --discard 5 --record 10 --window-px 300 675 200 575
+    warpdem measure --file calibration/data/zhang2023_table1.yaml
+    warpdem measure --file lab.yaml --experiment baffle_static --condition photos
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from typing import Any, Sequence
+
+from .errors import MeasurementError
+
+_VIDEO_EXT = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".wmv", ".mpg", ".mpeg")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="warpdem measure",
+        description="Measure an angle of repose from an image, a drum video or a measurement file "
+                    "(spec: experiments.md, section Images). Prints JSON.",
+    )
+    p.add_argument("source", nargs="?", help="image or video file")
+    p.add_argument("--file", help="measurement file (YAML/JSON, docs/measurement_format.md)")
+    p.add_argument("--experiment", help="experiment in --file")
+    p.add_argument("--condition", help="condition in --file (optional if the experiment has one)")
+    p.add_argument("--measure-images", action="store_true",
+                   help="with --file and no --experiment: also measure image/video conditions")
+    g = p.add_argument_group("image settings (override the file's image_settings)")
+    g.add_argument("--scale", type=float, metavar="PX_PER_MM", help="image scale, px/mm")
+    g.add_argument("--window", type=float, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
+                   help="fit window in mm (with --scale) or px, x right, z up from --origin-px")
+    g.add_argument("--window-px", type=float, nargs=4, metavar=("C0", "C1", "R0", "R1"),
+                   help="fit window in pixel columns/rows")
+    g.add_argument("--origin-px", type=float, nargs=2, metavar=("COL", "ROW"),
+                   help="pixel of x = z = 0 (default: bottom-left pixel)")
+    g.add_argument("--material", choices=("auto", "dark", "bright"))
+    g.add_argument("--threshold", type=float, help="grey level (0-255); default Otsu")
+    g.add_argument("--band", type=float, nargs=2, metavar=("LO", "HI"),
+                   help="fit only edge points with LO*h_ref <= z <= HI*h_ref")
+    g.add_argument("--h-ref", type=float, help="reference height for --band (default: highest edge point)")
+    g.add_argument("--min-angle", type=float, help="smallest angle accepted, degrees (default 1)")
+    g.add_argument("--open-px", type=int)
+    g.add_argument("--close-px", type=int)
+    v = p.add_argument_group("video (rotating drum, spec B)")
+    v.add_argument("--video", action="store_true", help="treat source as a video")
+    v.add_argument("--fps", type=float, help="frame rate (default: from the file)")
+    v.add_argument("--rpm", type=float, default=30.0)
+    v.add_argument("--discard", type=int, default=5, help="revolutions discarded (paper: 5)")
+    v.add_argument("--record", type=int, default=10, help="revolutions measured (paper: 10)")
+    v.add_argument("--t0", type=float, default=0.0, help="time the rotation starts, s")
+    o = p.add_argument_group("output")
+    o.add_argument("--diagnostic", help="diagnostic picture for an image (default ./<stem>_measure.png)")
+    o.add_argument("--diagnostic-dir", help="folder for diagnostic pictures of a video or file entry")
+    o.add_argument("--no-diagnostic", action="store_true")
+    o.add_argument("--json", dest="json_out", help="also write the JSON to this file")
+    return p
+
+
+def _overrides(a: argparse.Namespace) -> dict[str, Any]:
+    kw: dict[str, Any] = {}
+    if a.scale is not None:
+        kw["scale_px_per_mm"] = a.scale
+    if a.window is not None and a.window_px is not None:
+        raise MeasurementError("give --window or --window-px, not both")
+    if a.window is not None:
+        kw["window"] = list(a.window)
+        kw["window_units"] = "mm" if a.scale is not None else None
+    if a.window_px is not None:
+        kw["window"] = list(a.window_px)
+        kw["window_units"] = "px"
+    for name, key in (("origin_px", "origin_px"), ("material", "material"), ("threshold", "threshold"),
+                      ("band", "fit_band"), ("h_ref", "h_ref"), ("min_angle", "min_angle_deg"),
+                      ("open_px", "open_px"), ("close_px", "close_px")):
+        val = getattr(a, name)
+        if val is not None:
+            kw[key] = tuple(val) if isinstance(val, list) else val
+    return kw
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    kw = dict(base)
+    if "window" in over:
+        kw.pop("window_units", None)
+    kw.update(over)
+    if kw.get("window_units", "") is None:
+        # --window without --scale: mm if the file gives a scale, else px
+        kw["window_units"] = "mm" if kw.get("scale_px_per_mm") else "px"
+    return kw
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def _stem(path: str) -> str:
+    return os.path.splitext(os.path.basename(path))[0]
+
+
+def _run(a: argparse.Namespace) -> dict:
+    from .images import measure_image, video_frames_for_revolutions
+    from .records import load_measurements
+
+    over = _overrides(a)
+    if a.file:
+        mf = load_measurements(a.file)
+        if not a.experiment:
+            if a.source:
+                raise MeasurementError("give either a source image/video or --file, not both")
+            return {"file": a.file, "experiments": mf.summary(measure_images=a.measure_images)}
+        cond = mf.condition(a.experiment, a.condition)
+        out: dict[str, Any] = {"file": a.file, "experiment": cond.experiment, "condition": cond.name,
+                               "kind": cond.kind, "data": cond.data}
+        ddir = None if a.no_diagnostic else (a.diagnostic_dir or f"measure_{cond.experiment}_{cond.name}")
+        if cond.data == "images":
+            cond.images = [(p, _merge(kw, over)) for p, kw in cond.images]
+            out["images"] = [p for p, _ in cond.images]
+        elif cond.data == "video":
+            cond.video_settings = _merge(cond.video_settings, over)
+        elif over:
+            raise MeasurementError(f"image settings given but {a.experiment}/{cond.name} holds {cond.data}")
+        out.update(cond.stats(diagnostic_dir=ddir if cond.data in ("images", "video") else None).as_dict())
+        out["reported"] = cond.reported
+        if ddir and cond.data in ("images", "video"):
+            out["diagnostic_dir"] = ddir
+        return out
+    if not a.source:
+        raise MeasurementError("nothing to measure: give an image/video path or --file")
+    kw = _merge({}, over)
+    if a.video or a.source.lower().endswith(_VIDEO_EXT):
+        ddir = None if a.no_diagnostic else (a.diagnostic_dir or f"{_stem(a.source)}_frames")
+        res = video_frames_for_revolutions(a.source, a.fps, a.rpm, a.discard, a.record, t0=a.t0,
+                                           diagnostic_dir=ddir, **kw)
+        out = {"source": a.source, "rpm": a.rpm, "discard": a.discard, "record": a.record, **res.as_dict()}
+        if ddir:
+            out["diagnostic_dir"] = ddir
+        return out
+    diag = None if a.no_diagnostic else (a.diagnostic or f"{_stem(a.source)}_measure.png")
+    res = measure_image(a.source, diagnostic_path=diag, **kw)
+    out = {"source": a.source, **res.as_dict()}
+    if diag:
+        out["diagnostic"] = diag
+    return out
+
+
+def measure_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``warpdem measure``. Prints JSON to stdout; returns the
+    exit status (0 ok, 1 measurement error, 2 usage error)."""
+    parser = _parser()
+    try:
+        a = parser.parse_args(list(argv) if argv is not None else None)
+    except SystemExit as e:  # argparse usage error or --help
+        return int(e.code or 0)
+    try:
+        out = _clean(_run(a))
+    except MeasurementError as e:
+        print(json.dumps({"error": str(e)}), file=sys.stdout)
+        print(f"warpdem measure: {e}", file=sys.stderr)
+        return 1
+    text = json.dumps(out, indent=2)
+    print(text)
+    if a.json_out:
+        with open(a.json_out, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(measure_main())
