@@ -207,6 +207,92 @@ def deactivate_outside(
         wp.atomic_add(removed, 0, 1)
 
 
+# ----------------------------------------------------------------------------- neighbours
+@wp.kernel
+def build_neighbour_list(
+    grid: wp.uint64,
+    sphere_x: wp.array(dtype=wp.vec3),
+    sphere_radius: wp.array(dtype=float),
+    sphere_world: wp.array(dtype=int),
+    sphere_body: wp.array(dtype=int),
+    body_active: wp.array(dtype=int),
+    max_radius: float,
+    skin: float,
+    max_neighbours: int,
+    wall_mesh: wp.array(dtype=wp.uint64),
+    wall_world: wp.array(dtype=int),
+    wall_moving: wp.array(dtype=int),
+    num_walls: int,
+    nb_count: wp.array(dtype=int),
+    nb_index: wp.array(dtype=int),
+    near_wall: wp.array(dtype=int),
+    x_at_build: wp.array(dtype=wp.vec3),
+    overflow: wp.array(dtype=int),
+):
+    """Verlet list: spheres of the same world and another body within r_i + r_j + skin,
+    sorted by index; and whether a static wall lies within r_i + skin (its BVH is then
+    queried each step). Valid while no sphere moves more than skin / 2."""
+    i = wp.tid()
+    xi = sphere_x[i]
+    x_at_build[i] = xi
+    ri = sphere_radius[i]
+    b = sphere_body[i]
+    base = i * max_neighbours
+    n = int(0)
+    if body_active[b] != 0:
+        q = wp.hash_grid_query(grid, xi, ri + max_radius + skin, sphere_world[i])
+        j = int(0)
+        while wp.hash_grid_query_next(q, j):
+            if sphere_body[j] == b:
+                continue
+            d = xi - sphere_x[j]
+            reach = ri + sphere_radius[j] + skin
+            if wp.dot(d, d) >= reach * reach:
+                continue
+            if n >= max_neighbours:
+                wp.atomic_add(overflow, 0, 1)
+                continue
+            # insertion keeps the list sorted by index
+            k = n
+            while k > 0 and nb_index[base + k - 1] > j:
+                nb_index[base + k] = nb_index[base + k - 1]
+                k -= 1
+            nb_index[base + k] = j
+            n += 1
+    nb_count[i] = n
+    near = int(0)
+    if body_active[b] != 0:
+        ext = wp.vec3(ri + skin, ri + skin, ri + skin)
+        for k in range(num_walls):
+            ww = wall_world[k]
+            if wall_moving[k] != 0 or (ww >= 0 and ww != sphere_world[i]):
+                continue
+            mq = wp.mesh_query_aabb(wall_mesh[k], xi - ext, xi + ext)
+            tri = int(0)
+            if wp.mesh_query_aabb_next(mq, tri):
+                near = 1
+    near_wall[i] = near
+
+
+@wp.kernel
+def count_build(builds: wp.array(dtype=int)):
+    builds[0] = builds[0] + 1
+
+
+@wp.kernel
+def flag_moved_spheres(
+    sphere_x: wp.array(dtype=wp.vec3),
+    x_at_build: wp.array(dtype=wp.vec3),
+    half_skin: float,
+    rebuild: wp.array(dtype=int),
+):
+    """Set rebuild[0] = 1 if any sphere moved more than skin / 2 since the last list build."""
+    i = wp.tid()
+    d = sphere_x[i] - x_at_build[i]
+    if wp.dot(d, d) > half_skin * half_skin:
+        rebuild[0] = 1
+
+
 # ----------------------------------------------------------------------------- contacts
 @functools.lru_cache(maxsize=None)
 def contact_kernel(law: ContactLaw):
@@ -214,9 +300,10 @@ def contact_kernel(law: ContactLaw):
 
     The sub-models' ``wp.func``s are compiled into a single kernel; a sub-model that is
     ``none`` compiles to nothing. One thread per sphere: (1) collect wall contacts (closest
-    feature per triangle from the BVH, merged across triangles whose contact normals agree),
-    (2) particle contacts from the grouped hash grid (never across worlds), (3) look up each
-    contact's history in last step's slots, evaluate the law, write this step's slots.
+    feature per triangle from the BVH, merged across triangles that describe one contact),
+    (2) particle contacts from the Verlet neighbour list (:func:`build_neighbour_list`), (3)
+    look up each contact's history in last step's slots, evaluate the law, write this step's
+    slots.
     """
     normal_f = law.submodels["normal"].make(law.column)
     cohesion_f = law.submodels["cohesion"].make(law.column)
@@ -235,7 +322,11 @@ def contact_kernel(law: ContactLaw):
 
     @wp.kernel
     def contacts(
-        grid: wp.uint64,
+        nb_count: wp.array(dtype=int),
+        nb_index: wp.array(dtype=int),
+        max_neighbours: int,
+        near_wall: wp.array(dtype=int),
+        wall_moving: wp.array(dtype=int),
         sphere_body: wp.array(dtype=int),
         sphere_radius: wp.array(dtype=float),
         sphere_material: wp.array(dtype=int),
@@ -314,9 +405,12 @@ def contact_kernel(law: ContactLaw):
         t_now = time[0]
 
         # ---- (1) wall contacts: collect, merging triangles whose normals agree
+        close_to_static_wall = near_wall[i]
         for k in range(num_walls):
             ww = wall_world[k]
             if ww >= 0 and ww != world:
+                continue
+            if wall_moving[k] == 0 and close_to_static_wall == 0:
                 continue
             mesh = wall_mesh[k]
             tag = -(k + 1)
@@ -442,15 +536,12 @@ def contact_kernel(law: ContactLaw):
                 wp.atomic_add(wear_impulse_n, idx, wp.abs(fn) * dt)
                 wp.atomic_add(wear_impulse_t, idx, wp.length(ft) * dt)
 
-        # ---- (2) particle contacts (grouped hash grid: same world only)
-        gquery = wp.hash_grid_query(grid, xi, ri + max_radius, world)
-        j = int(0)
-        while wp.hash_grid_query_next(gquery, j):
-            if j == i:
-                continue
+        # ---- (2) particle contacts from the neighbour list (same world, other bodies,
+        # sorted by index so the force sum order does not depend on when it was built)
+        nb_base = i * max_neighbours
+        for nb in range(nb_count[i]):
+            j = nb_index[nb_base + nb]
             bj = sphere_body[j]
-            if bj == b:
-                continue
             if body_active[bj] == 0:
                 continue
             d = xi - sphere_x[j]

@@ -233,6 +233,7 @@ def gravel_fill(name: str, fill_level: str | int = "medium", basis: str = "table
     """Multi-sphere fill of one class: ``(ClumpTemplate at density 1 kg/m^3, FillReport)``. Cached."""
     from .multisphere import fill_mesh  # local import: multisphere imports nothing from here
 
+    _spec(name)
     n = _fill_level_count(name, fill_level)
     return fill_mesh(shape_mesh(name, basis), n, density=1.0, name=name)
 
@@ -245,4 +246,6 @@ def gravel_templates(fill_level: str | int = "medium", density: float = 2661.0,
     density: particle density [kg/m^3] (seed paper Sec. 2.3.2: 2661).
     The fills are cached per (class, level, basis) for the life of the process.
     """
+    if not (density > 0 and math.isfinite(density)):
+        raise ConfigError(f"gravel_templates: density must be > 0 kg/m^3, got {density}")
     return {k: gravel_fill(k, fill_level, basis)[0].with_density(density) for k in SHAPE_CLASSES}

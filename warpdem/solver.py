@@ -8,7 +8,7 @@ import numpy as np
 import warp as wp
 
 from . import kernels
-from .errors import ContactOverflowError, StabilityError
+from .errors import ConfigError, ContactOverflowError, StabilityError
 from .model import Model, State
 from .timestep import TimeStepLimits, check_time_step
 
@@ -68,9 +68,14 @@ class DEMSolver:
         dt: time step [s], checked against :func:`~warpdem.timestep.check_time_step`.
         v_ref: largest expected impact speed for the stability check [m/s].
         force: accept a step above the stability limit.
+        neighbour_skin: Verlet skin [m] (default 0.3 * max radius): the neighbour list holds
+            pairs closer than r_i + r_j + skin and is rebuilt (on the device, through a
+            conditional graph node) once any sphere has moved more than skin / 2.
+        max_neighbours: list capacity per sphere (default 2 * max_contacts); overflow is an error.
     """
 
-    def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False) -> None:
+    def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
+                 neighbour_skin: float | None = None, max_neighbours: int | None = None) -> None:
         self.model = model
         self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
         self.dt = float(dt)
@@ -89,7 +94,19 @@ class DEMSolver:
         self.wall_stats = WallStats(model)
         dim = int(min(256, max(16, round((2.0 * n) ** (1.0 / 3.0)))))
         self.grid = wp.HashGrid(dim, dim, dim, device=d)
-        self.cell_size = 2.0 * model.max_radius
+        self.skin = 0.3 * model.max_radius if neighbour_skin is None else float(neighbour_skin)
+        if not self.skin > 0:
+            raise ConfigError(f"neighbour_skin must be > 0 m, got {neighbour_skin}")
+        self.max_neighbours = 2 * model.max_contacts if max_neighbours is None else int(max_neighbours)
+        self.cell_size = 2.0 * model.max_radius + self.skin
+        self.nb_count = wp.zeros(n, dtype=int, device=d)
+        self.nb_index = wp.zeros(n * self.max_neighbours, dtype=int, device=d)
+        self.near_wall = wp.zeros(n, dtype=int, device=d)
+        self.x_at_build = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.rebuild = wp.ones(1, dtype=int, device=d)
+        self.nb_overflow = wp.zeros(1, dtype=int, device=d)
+        self.list_builds = wp.zeros(1, dtype=int, device=d)
+        self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
         self.kernel = kernels.contact_kernel(model.contact_law)
         self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
 
@@ -108,21 +125,10 @@ class DEMSolver:
             w.mesh.refit()
         wp.launch(kernels.place_spheres, dim=m.num_spheres,
                   inputs=[m.sphere_body, m.sphere_offset, state_in.body_q, state_in.body_rot, state_in.sphere_x], device=d)
-        self.grid.build(state_in.sphere_x, self.cell_size, groups=m.sphere_world)
-        ws = self.wall_stats
-        wp.launch(self.kernel, dim=m.num_spheres, inputs=[
-            self.grid.id, m.sphere_body, m.sphere_radius, m.sphere_material, m.sphere_world, state_in.sphere_x,
-            m.body_mass, m.body_inertia, state_in.body_active, state_in.body_q, state_in.body_v, state_in.body_w,
-            m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
-            m.wall_mesh, m.wall_world, m.wall_material, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel,
-            m.wall_origin, m.wall_t_start, m.wall_t_stop, len(m.walls), m.total_triangles, state_in.time, dt,
-            m.max_contacts,
-            state_in.contact_count, state_in.contact_partner, state_in.contact_spring, state_in.contact_roll,
-            state_in.contact_wnormal,
-            state_out.contact_count, state_out.contact_partner, state_out.contact_spring, state_out.contact_roll,
-            state_out.contact_wnormal,
-            self.slot_point, self.slot_depth, self.slot_tri, self.sphere_f, self.sphere_t,
-            ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.overflow], device=d)
+        wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
+                  inputs=[state_in.sphere_x, self.x_at_build, 0.5 * self.skin, self.rebuild], device=d)
+        wp.capture_if(self.rebuild, on_true=self._build_neighbour_list, state=state_in)
+        self.launch_contacts(state_in, state_out, dt)
         wp.launch(kernels.integrate_bodies, dim=m.num_bodies, inputs=[
             m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
             self.external_force, int(self.use_external_force), wp.vec3(*m.gravity), dt,
@@ -131,11 +137,52 @@ class DEMSolver:
             self.bad], device=d)
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
 
+
+    def _build_neighbour_list(self, state: State) -> None:
+        m = self.model
+        self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
+        wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[
+            self.grid.id, state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active,
+            m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.wall_world, self.wall_moving, len(m.walls),
+            self.nb_count, self.nb_index, self.near_wall, self.x_at_build, self.nb_overflow], device=m.device)
+        self.rebuild.zero_()
+        wp.launch(kernels.count_build, dim=1, inputs=[self.list_builds], device=m.device)
+
+    def request_neighbour_rebuild(self) -> None:
+        """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
+        self.rebuild.fill_(1)
+
+    def launch_contacts(self, state_in: State, state_out: State, dt: float, num_walls: int | None = None) -> None:
+        """The contact kernel alone (the grid must be built for ``state_in``)."""
+        m = self.model
+        d = m.device
+        ws = self.wall_stats
+        nw = len(m.walls) if num_walls is None else num_walls
+        wp.launch(self.kernel, dim=m.num_spheres, inputs=[
+            self.nb_count, self.nb_index, self.max_neighbours, self.near_wall, self.wall_moving, m.sphere_body, m.sphere_radius, m.sphere_material, m.sphere_world, state_in.sphere_x,
+            m.body_mass, m.body_inertia, state_in.body_active, state_in.body_q, state_in.body_v, state_in.body_w,
+            m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
+            m.wall_mesh, m.wall_world, m.wall_material, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel,
+            m.wall_origin, m.wall_t_start, m.wall_t_stop, nw, m.total_triangles, state_in.time, dt,
+            m.max_contacts,
+            state_in.contact_count, state_in.contact_partner, state_in.contact_spring, state_in.contact_roll,
+            state_in.contact_wnormal,
+            state_out.contact_count, state_out.contact_partner, state_out.contact_spring, state_out.contact_roll,
+            state_out.contact_wnormal,
+            self.slot_point, self.slot_depth, self.slot_tri, self.sphere_f, self.sphere_t,
+            ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.overflow], device=d)
+
     # ---------------------------------------------------------------- checks
     def check(self) -> None:
         """Raise if a contact slot overflowed or a state became non-finite since the last check."""
         ov = int(self.overflow.numpy()[0])
         bad = int(self.bad.numpy()[0])
+        nb_ov = int(self.nb_overflow.numpy()[0])
+        if nb_ov:
+            self.nb_overflow.zero_()
+            raise ContactOverflowError(
+                f"{nb_ov} neighbour(s) did not fit the {self.max_neighbours} neighbour-list slots per sphere; "
+                f"pass a larger max_neighbours (or a smaller neighbour_skin) to the solver")
         if ov:
             self.overflow.zero_()
             raise ContactOverflowError(
@@ -156,9 +203,11 @@ class Simulation:
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
-                 use_graph: bool | None = None, steps_per_graph: int = 20) -> None:
+                 use_graph: bool | None = None, steps_per_graph: int = 20, neighbour_skin: float | None = None,
+                 max_neighbours: int | None = None) -> None:
         self.model = model
-        self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force)
+        self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
+                                max_neighbours=max_neighbours)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0

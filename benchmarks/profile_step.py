@@ -1,0 +1,103 @@
+"""Where does a step's time go? Times each stage of DEMSolver.step on a settled bed.
+
+    python benchmarks/profile_step.py --spheres 1000000 --device cuda [--order morton|lattice]
+
+Prints one JSON line: milliseconds per stage (wall placement, sphere placement, hash-grid
+build, contact kernel, integration) averaged over --repeats steps, plus the bytes a step
+must at least move per sphere and the effective bandwidth that implies.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+import warp as wp
+
+import warpdem as wd
+from warpdem import kernels
+
+from settled_bed import build  # noqa: E402  (run from benchmarks/ or with it on sys.path)
+
+
+@wp.kernel
+def count_neighbours(grid: wp.uint64, x: wp.array(dtype=wp.vec3), r: wp.array(dtype=float),
+                     world: wp.array(dtype=int), rmax: float, out: wp.array(dtype=int)):
+    """Grid traversal cost alone: count touching neighbours."""
+    i = wp.tid()
+    xi = x[i]
+    n = int(0)
+    q = wp.hash_grid_query(grid, xi, r[i] + rmax, world[i])
+    j = int(0)
+    while wp.hash_grid_query_next(q, j):
+        d = xi - x[j]
+        rr = r[i] + r[j]
+        if j != i and wp.dot(d, d) < rr * rr:
+            n += 1
+    out[i] = n
+
+
+def timed(fn, device, repeats):
+    wp.synchronize_device(device)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        fn()
+    wp.synchronize_device(device)
+    return (time.perf_counter() - t0) / repeats * 1e3
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--spheres", type=int, default=200000)
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--settle-time", type=float, default=0.6)
+    ap.add_argument("--repeats", type=int, default=50)
+    ap.add_argument("--rolling", default="epsd")
+    ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
+    args = ap.parse_args(argv)
+    wp.config.quiet = True
+    device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
+    model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
+    sim = wd.Simulation(model, 5e-5, steps_per_graph=50)
+    sim.run(int(args.settle_time / 5e-5), check_every=5000)
+    s, m, so = sim.state, model, sim.solver
+
+    def place():
+        wp.launch(kernels.place_spheres, dim=m.num_spheres,
+                  inputs=[m.sphere_body, m.sphere_offset, s.body_q, s.body_rot, s.sphere_x], device=m.device)
+
+    def grid():
+        so.grid.build(s.sphere_x, so.cell_size, groups=m.sphere_world)
+
+    def full_step():
+        so.step(sim.state, sim._next)
+
+    stages = dict(place_spheres=timed(place, device, args.repeats), hash_grid_build=timed(grid, device, args.repeats),
+                  full_step=timed(full_step, device, args.repeats))
+    grid()
+    stages["contact_kernel"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5), device, args.repeats)
+    stages["contact_kernel_no_walls"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5, num_walls=0), device, args.repeats)
+    nb = wp.zeros(m.num_spheres, dtype=int, device=device)
+    stages["grid_query_only"] = timed(lambda: wp.launch(count_neighbours, dim=m.num_spheres, inputs=[
+        so.grid.id, s.sphere_x, m.sphere_radius, m.sphere_world, m.max_radius, nb], device=device), device, args.repeats)
+    # the contact kernel alone: re-run it through a step minus the others is awkward, so
+    # time a step with the grid already built by patching build to a no-op
+    orig = so.grid.build
+    so.grid.build = lambda *a, **k: None
+    stages["step_without_grid_build"] = timed(full_step, device, args.repeats)
+    so.grid.build = orig
+    n = m.num_spheres
+    k_avg = float(s.contact_count.numpy().mean())
+    # minimum traffic per sphere-step: body state in/out (q, rot, v, w: 52 B each way), sphere x
+    # (12 B w + r), contact slots in/out (count + per contact partner 4 B + spring 12 B + roll 12 B)
+    bytes_per_sphere = 2 * 52 + 12 * 3 + 8 + 2 * (4 + k_avg * 28)
+    ms = stages["full_step"]
+    out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order, contacts_per_sphere=round(k_avg, 3),
+               ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
+               min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))
+    print(json.dumps(out), flush=True)
+
+
+if __name__ == "__main__":
+    main()
