@@ -5,25 +5,34 @@ import numpy as np
 import trimesh
 
 
-def plane(center, size_x: float, size_y: float, normal=(0.0, 0.0, 1.0), subdivisions: int = 1) -> trimesh.Trimesh:
-    """A rectangle (two triangles per cell) centred at ``center`` with the given normal."""
+def plane(center, size_u: float, size_v: float, normal=(0.0, 0.0, 1.0), subdivisions: int = 1) -> trimesh.Trimesh:
+    """A rectangle centred at ``center`` [m] facing ``normal`` (the side particles touch).
+
+    In-plane axes: u = the first world axis (x, then y) not parallel to the normal, projected
+    onto the plane; v = normal x u. So a floor (normal z) spans x by y, a wall facing +-x
+    spans y by z, and a wall facing +-y spans x by z. Each cell is split into two triangles.
+    """
     n = np.asarray(normal, dtype=float)
+    if n.shape != (3,) or np.linalg.norm(n) == 0:
+        raise ValueError(f"plane normal must be a non-zero 3-vector, got {normal!r}")
     n = n / np.linalg.norm(n)
-    k = subdivisions
-    u = np.linspace(-0.5, 0.5, k + 1)
-    gx, gy = np.meshgrid(u * size_x, u * size_y, indexing="ij")
-    verts = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    for axis in np.eye(3):
+        u = axis - np.dot(axis, n) * n
+        if np.linalg.norm(u) > 1e-6:
+            break
+    u = u / np.linalg.norm(u)
+    v = np.cross(n, u)
+    k = int(subdivisions)
+    s = np.linspace(-0.5, 0.5, k + 1)
+    gu, gv = np.meshgrid(s * size_u, s * size_v, indexing="ij")
+    verts = np.asarray(center, dtype=float) + gu.reshape(-1, 1) * u + gv.reshape(-1, 1) * v
     faces = []
     for i in range(k):
         for j in range(k):
             a = i * (k + 1) + j
             b, c, d = a + (k + 1), a + 1, a + k + 2
-            faces += [[a, b, d], [a, d, c]]
-    mesh = trimesh.Trimesh(verts, np.array(faces), process=False)
-    rot = trimesh.geometry.align_vectors([0, 0, 1], n)
-    mesh.apply_transform(rot)
-    mesh.apply_translation(center)
-    return mesh
+            faces += [[a, b, d], [a, d, c]]  # counter-clockwise seen from the normal side
+    return trimesh.Trimesh(verts, np.array(faces), process=False)
 
 
 def open_box(lower, upper, top: bool = False) -> trimesh.Trimesh:
