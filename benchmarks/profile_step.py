@@ -39,6 +39,7 @@ def count_neighbours(grid: wp.uint64, x: wp.array(dtype=wp.vec3), r: wp.array(dt
 
 
 def timed(fn, device, repeats):
+    fn()  # warm-up: compile and allocate outside the timing
     wp.synchronize_device(device)
     t0 = time.perf_counter()
     for _ in range(repeats):

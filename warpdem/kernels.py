@@ -15,6 +15,9 @@ import warp as wp
 from .contact.base import ContactInput
 from .contact.law import ContactLaw
 
+# Engine kernels need no adjoints (halves compile time); fast math for sqrt/div/log on CUDA.
+wp.set_module_options({"enable_backward": False, "fast_math": True})
+
 # Wall contacts of one wall whose normals agree within this cosine are one contact
 # (a sphere touching two triangles of a flat or gently curved face feels one force).
 WALL_MERGE_COS = wp.constant(0.99)
@@ -111,6 +114,58 @@ def place_spheres(
     i = wp.tid()
     b = sphere_body[i]
     sphere_x[i] = body_q[b] + wp.quat_rotate(body_rot[b], sphere_offset[i])
+
+
+@wp.struct
+class SphereView:
+    """What a contact needs of a sphere, packed in 64 bytes so that one neighbour costs one
+    gather instead of ten (radius < 0 marks a sphere of an inactive body)."""
+
+    x: wp.vec3  # sphere centre [m]
+    r: float  # radius [m]
+    v: wp.vec3  # body velocity [m/s]
+    m: float  # body mass [kg]
+    w: wp.vec3  # body angular velocity [rad/s]
+    i_mean: float  # mean principal moment of inertia of the body [kg m^2]
+    xb: wp.vec3  # body centre of mass [m]
+    mat: int  # material index
+
+
+@wp.kernel
+def place_sphere_views(
+    sphere_body: wp.array(dtype=int),
+    sphere_offset: wp.array(dtype=wp.vec3),
+    sphere_radius: wp.array(dtype=float),
+    sphere_material: wp.array(dtype=int),
+    body_q: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.quat),
+    body_v: wp.array(dtype=wp.vec3),
+    body_w: wp.array(dtype=wp.vec3),
+    body_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_active: wp.array(dtype=int),
+    sphere_x: wp.array(dtype=wp.vec3),
+    views: wp.array(dtype=SphereView),
+):
+    """Sphere positions from body poses, and each sphere's packed :class:`SphereView`."""
+    i = wp.tid()
+    b = sphere_body[i]
+    xb = body_q[b]
+    x = xb + wp.quat_rotate(body_rot[b], sphere_offset[i])
+    sphere_x[i] = x
+    inertia = body_inertia[b]
+    sv = SphereView()
+    sv.x = x
+    sv.r = sphere_radius[i]
+    if body_active[b] == 0:
+        sv.r = -1.0
+    sv.v = body_v[b]
+    sv.m = body_mass[b]
+    sv.w = body_w[b]
+    sv.i_mean = (inertia[0] + inertia[1] + inertia[2]) / 3.0
+    sv.xb = xb
+    sv.mat = sphere_material[i]
+    views[i] = sv
 
 
 @wp.kernel
@@ -228,10 +283,14 @@ def build_neighbour_list(
     near_wall: wp.array(dtype=int),
     x_at_build: wp.array(dtype=wp.vec3),
     overflow: wp.array(dtype=int),
+    rebuild: wp.array(dtype=int),
 ):
     """Verlet list: spheres of the same world and another body within r_i + r_j + skin,
     sorted by index; and whether a static wall lies within r_i + skin (its BVH is then
-    queried each step). Valid while no sphere moves more than skin / 2."""
+    queried each step). Valid while no sphere moves more than skin / 2. Does nothing unless
+    ``rebuild[0]`` is set, so the launch can sit unconditionally in a CUDA graph."""
+    if rebuild[0] == 0:
+        return
     i = wp.tid()
     xi = sphere_x[i]
     x_at_build[i] = xi
@@ -275,8 +334,11 @@ def build_neighbour_list(
 
 
 @wp.kernel
-def count_build(builds: wp.array(dtype=int)):
-    builds[0] = builds[0] + 1
+def finish_build(rebuild: wp.array(dtype=int), builds: wp.array(dtype=int)):
+    """Count a list build and clear the request flag."""
+    if rebuild[0] != 0:
+        builds[0] = builds[0] + 1
+        rebuild[0] = 0
 
 
 @wp.kernel
@@ -327,17 +389,8 @@ def contact_kernel(law: ContactLaw):
         max_neighbours: int,
         near_wall: wp.array(dtype=int),
         wall_moving: wp.array(dtype=int),
-        sphere_body: wp.array(dtype=int),
-        sphere_radius: wp.array(dtype=float),
-        sphere_material: wp.array(dtype=int),
+        views: wp.array(dtype=SphereView),
         sphere_world: wp.array(dtype=int),
-        sphere_x: wp.array(dtype=wp.vec3),
-        body_mass: wp.array(dtype=float),
-        body_inertia: wp.array(dtype=wp.vec3),
-        body_active: wp.array(dtype=int),
-        body_q: wp.array(dtype=wp.vec3),
-        body_v: wp.array(dtype=wp.vec3),
-        body_w: wp.array(dtype=wp.vec3),
         mat_e: wp.array(dtype=float),
         mat_nu: wp.array(dtype=float),
         params: wp.array2d(dtype=float),
@@ -379,22 +432,21 @@ def contact_kernel(law: ContactLaw):
     ):
         i = wp.tid()
         base = i * max_contacts
-        b = sphere_body[i]
-        if body_active[b] == 0:
+        me = views[i]
+        if me.r < 0.0:
             count_out[i] = 0
             sphere_f[i] = wp.vec3(0.0)
             sphere_t[i] = wp.vec3(0.0)
             return
         world = sphere_world[i]
-        xi = sphere_x[i]
-        ri = sphere_radius[i]
-        mi = sphere_material[i]
-        xb = body_q[b]
-        vb = body_v[b]
-        wb = body_w[b]
-        mb = body_mass[b]
-        ib = body_inertia[b]
-        ib_mean = (ib[0] + ib[1] + ib[2]) / 3.0
+        xi = me.x
+        ri = me.r
+        mi = me.mat
+        xb = me.xb
+        vb = me.v
+        wb = me.w
+        mb = me.m
+        ib_mean = me.i_mean
         e_i = mat_e[mi]
         nu_i = mat_nu[mi]
         g_i = e_i / (2.0 * (1.0 + nu_i))
@@ -541,11 +593,11 @@ def contact_kernel(law: ContactLaw):
         nb_base = i * max_neighbours
         for nb in range(nb_count[i]):
             j = nb_index[nb_base + nb]
-            bj = sphere_body[j]
-            if body_active[bj] == 0:
+            other = views[j]
+            rj = other.r
+            if rj < 0.0:
                 continue
-            d = xi - sphere_x[j]
-            rj = sphere_radius[j]
+            d = xi - other.x
             rr = ri + rj
             dist2 = wp.dot(d, d)
             if dist2 >= rr * rr:
@@ -567,13 +619,12 @@ def contact_kernel(law: ContactLaw):
                         roll = roll_in[base + o]
             arm_i = ri - 0.5 * overlap
             cp = xi - arm_i * nrm
-            xbj = body_q[bj]
-            vbj = body_v[bj]
-            wbj = body_w[bj]
-            mbj = body_mass[bj]
-            ibj = body_inertia[bj]
-            ibj_mean = (ibj[0] + ibj[1] + ibj[2]) / 3.0
-            mj = sphere_material[j]
+            xbj = other.xb
+            vbj = other.v
+            wbj = other.w
+            mbj = other.m
+            ibj_mean = other.i_mean
+            mj = other.mat
             e_j = mat_e[mj]
             nu_j = mat_nu[mj]
             g_j = e_j / (2.0 * (1.0 + nu_j))

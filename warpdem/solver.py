@@ -69,8 +69,8 @@ class DEMSolver:
         v_ref: largest expected impact speed for the stability check [m/s].
         force: accept a step above the stability limit.
         neighbour_skin: Verlet skin [m] (default 0.3 * max radius): the neighbour list holds
-            pairs closer than r_i + r_j + skin and is rebuilt (on the device, through a
-            conditional graph node) once any sphere has moved more than skin / 2.
+            pairs closer than r_i + r_j + skin and is rebuilt (decided on the device, no host
+            sync) once any sphere has moved more than skin / 2.
         max_neighbours: list capacity per sphere (default 2 * max_contacts); overflow is an error.
     """
 
@@ -99,6 +99,7 @@ class DEMSolver:
             raise ConfigError(f"neighbour_skin must be > 0 m, got {neighbour_skin}")
         self.max_neighbours = 2 * model.max_contacts if max_neighbours is None else int(max_neighbours)
         self.cell_size = 2.0 * model.max_radius + self.skin
+        self.views = wp.zeros(n, dtype=kernels.SphereView, device=d)
         self.nb_count = wp.zeros(n, dtype=int, device=d)
         self.nb_index = wp.zeros(n * self.max_neighbours, dtype=int, device=d)
         self.near_wall = wp.zeros(n, dtype=int, device=d)
@@ -123,11 +124,13 @@ class DEMSolver:
                               wp.vec3(*w.motion.origin), float(w.motion.start), float(min(w.motion.stop, 3.0e38)),
                               state_in.time, w.mesh.points], device=d)
             w.mesh.refit()
-        wp.launch(kernels.place_spheres, dim=m.num_spheres,
-                  inputs=[m.sphere_body, m.sphere_offset, state_in.body_q, state_in.body_rot, state_in.sphere_x], device=d)
+        wp.launch(kernels.place_sphere_views, dim=m.num_spheres, inputs=[
+            m.sphere_body, m.sphere_offset, m.sphere_radius, m.sphere_material, state_in.body_q, state_in.body_rot,
+            state_in.body_v, state_in.body_w, m.body_mass, m.body_inertia, state_in.body_active, state_in.sphere_x,
+            self.views], device=d)
         wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
                   inputs=[state_in.sphere_x, self.x_at_build, 0.5 * self.skin, self.rebuild], device=d)
-        wp.capture_if(self.rebuild, on_true=self._build_neighbour_list, state=state_in)
+        self._build_neighbour_list(state_in)
         self.launch_contacts(state_in, state_out, dt)
         wp.launch(kernels.integrate_bodies, dim=m.num_bodies, inputs=[
             m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
@@ -139,14 +142,19 @@ class DEMSolver:
 
 
     def _build_neighbour_list(self, state: State) -> None:
+        """Rebuild the Verlet list if ``self.rebuild`` is set (decided on the device).
+
+        The hash grid is rebuilt every step (cheap); the list kernel returns at once unless a
+        sphere moved more than skin / 2. (A conditional CUDA-graph node around both would
+        also skip the grid, but HashGrid.build does not instantiate inside one.)"""
         m = self.model
         self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
         wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[
             self.grid.id, state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active,
             m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.wall_world, self.wall_moving, len(m.walls),
-            self.nb_count, self.nb_index, self.near_wall, self.x_at_build, self.nb_overflow], device=m.device)
-        self.rebuild.zero_()
-        wp.launch(kernels.count_build, dim=1, inputs=[self.list_builds], device=m.device)
+            self.nb_count, self.nb_index, self.near_wall, self.x_at_build, self.nb_overflow, self.rebuild],
+            device=m.device)
+        wp.launch(kernels.finish_build, dim=1, inputs=[self.rebuild, self.list_builds], device=m.device)
 
     def request_neighbour_rebuild(self) -> None:
         """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
@@ -159,9 +167,8 @@ class DEMSolver:
         ws = self.wall_stats
         nw = len(m.walls) if num_walls is None else num_walls
         wp.launch(self.kernel, dim=m.num_spheres, inputs=[
-            self.nb_count, self.nb_index, self.max_neighbours, self.near_wall, self.wall_moving, m.sphere_body, m.sphere_radius, m.sphere_material, m.sphere_world, state_in.sphere_x,
-            m.body_mass, m.body_inertia, state_in.body_active, state_in.body_q, state_in.body_v, state_in.body_w,
-            m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
+            self.nb_count, self.nb_index, self.max_neighbours, self.near_wall, self.wall_moving, self.views,
+            m.sphere_world, m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
             m.wall_mesh, m.wall_world, m.wall_material, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel,
             m.wall_origin, m.wall_t_start, m.wall_t_stop, nw, m.total_triangles, state_in.time, dt,
             m.max_contacts,
