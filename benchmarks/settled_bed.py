@@ -80,13 +80,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--settle-time", type=float, default=3.0, help="max simulated settling time [s]")
     ap.add_argument("--max-contacts", type=int, default=12)
     ap.add_argument("--no-graph", action="store_true")
+    ap.add_argument("--conditional-rebuild", action="store_true", help="skip the grid build on steps without a list rebuild")
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"], help="memory order of the spheres")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     t0 = time.perf_counter()
     model, width = build(args.spheres, args.worlds, args.rolling, device, args.max_contacts, args.order)
-    sim = wd.Simulation(model, 5.0e-5, use_graph=None if not args.no_graph else False, steps_per_graph=50)
+    sim = wd.Simulation(model, 5.0e-5, use_graph=None if not args.no_graph else False, steps_per_graph=50,
+                        conditional_rebuild=args.conditional_rebuild)
     t_build = time.perf_counter() - t0
     t0 = time.perf_counter()
     settle_sim_time = sim.settle(ke_per_particle=1e-6, max_time=args.settle_time, check_interval=0.05, min_time=0.3)
@@ -107,7 +109,8 @@ def main(argv=None) -> dict:
         contacts_per_sphere=round(float(counts.mean()), 3), rolling=args.rolling, dt=5e-5,
         box_width_m=round(width, 4), settle_sim_time_s=round(settle_sim_time, 3), settle_wall_s=round(t_settle, 1),
         ke_per_particle_J=float(f"{ke.max():.3g}"), build_s=round(t_build, 1), warp=wp.config.version,
-        graph=sim.use_graph, order=args.order, date=time.strftime("%Y-%m-%d"))
+        graph=sim.use_graph, order=args.order, conditional_rebuild=args.conditional_rebuild,
+        list_builds=int(sim.solver.list_builds.numpy()[0]), date=time.strftime("%Y-%m-%d"))
     print(json.dumps(result), flush=True)
     return result
 

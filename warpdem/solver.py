@@ -72,11 +72,15 @@ class DEMSolver:
             pairs closer than r_i + r_j + skin and is rebuilt (decided on the device, no host
             sync) once any sphere has moved more than skin / 2.
         max_neighbours: list capacity per sphere (default 2 * max_contacts); overflow is an error.
+        conditional_rebuild: put the hash-grid build and list kernel behind a conditional graph
+            node (``wp.capture_if``) so steps without a rebuild skip the grid build too.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
-                 neighbour_skin: float | None = None, max_neighbours: int | None = None) -> None:
+                 neighbour_skin: float | None = None, max_neighbours: int | None = None,
+                 conditional_rebuild: bool = False) -> None:
         self.model = model
+        self.conditional_rebuild = bool(conditional_rebuild)
         self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
         self.dt = float(dt)
         d = model.device
@@ -130,7 +134,10 @@ class DEMSolver:
             self.views], device=d)
         wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
                   inputs=[state_in.sphere_x, self.x_at_build, 0.5 * self.skin, self.rebuild], device=d)
-        self._build_neighbour_list(state_in)
+        if self.conditional_rebuild:
+            wp.capture_if(self.rebuild, on_true=self._build_neighbour_list, state=state_in)
+        else:
+            self._build_neighbour_list(state_in)
         self.launch_contacts(state_in, state_out, dt)
         wp.launch(kernels.integrate_bodies, dim=m.num_bodies, inputs=[
             m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
@@ -211,10 +218,10 @@ class Simulation:
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  use_graph: bool | None = None, steps_per_graph: int = 20, neighbour_skin: float | None = None,
-                 max_neighbours: int | None = None) -> None:
+                 max_neighbours: int | None = None, conditional_rebuild: bool = False) -> None:
         self.model = model
         self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
-                                max_neighbours=max_neighbours)
+                                max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0
