@@ -16,7 +16,7 @@ from pathlib import Path
 COMMANDS = {
     "experiment": ("calibration.experiments.cli", "experiment_main"),
     "measure": ("calibration.measurement.cli", "measure_main"),
-    "calibrate": ("calibration.cli", "calibrate_main"),
+    "calibrate": ("calibration.campaign", "calibrate_main"),
 }
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,0 +1,446 @@
+"""Calibration campaign: design -> DEM runs (batched as worlds) -> surrogate -> NSGA-II ->
+sensitivity -> confirmation runs -> validation on another experiment (seed paper, Fig. 9).
+
+Data flows one way and every stage writes what it produced into the output folder:
+
+==========================  ===================================================================
+``samples.jsonl``           one line per (design sample, response) DEM result as it arrives;
+                            an interrupted campaign resumes from it and loses nothing; failed
+                            runs are kept with their error (never dropped silently)
+``results.json``            every number: design, surrogate CV choice and held-out metrics,
+                            NSGA-II Pareto set and compromise, acceptable set ranges, Sobol
+                            indices, confirmation and validation runs with relative errors
+``*.png``                   predicted vs simulated, acceptable set, sensitivity
+``summary.md``              a short human-readable account
+==========================  ===================================================================
+
+The configuration (YAML/JSON) is documented in ``calibration/configs/quick_calibration.yaml``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import warp as wp
+import yaml
+
+import warpdem as wd
+from warpdem import ConfigError
+
+from .designs import Parameter, ParameterSpace, latin_hypercube
+from .experiments import make_experiment
+from .measurement.records import load_measurements
+
+TOP_KEYS = {"name", "device", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
+            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity"}
+RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target"}
+
+
+# ----------------------------------------------------------------------------- configuration
+@dataclass
+class Response:
+    """A measured response: an experiment, its settings, and the target it must match [deg]."""
+
+    name: str
+    experiment: str
+    scale: str = "quick"
+    settings: dict[str, Any] = field(default_factory=dict)
+    target: Any = None  # float [deg], {file, experiment, condition}, or {dem_at: {parameters}}
+    target_deg: float | None = None
+    target_std_deg: float | None = None
+    target_source: str = ""
+
+
+@dataclass
+class CampaignConfig:
+    name: str
+    space: ParameterSpace
+    responses: list[Response]
+    validation: Response | None = None
+    fixed: dict[str, float] = field(default_factory=dict)
+    rolling: str = "epsd"
+    samples: int = 24
+    held_out: int = 6
+    seed: int = 0
+    batch_worlds: int = 8
+    device: str | None = None
+    output: str = "results/calibration"
+    optimisation: dict[str, Any] = field(default_factory=dict)
+    confirmation_runs: int = 1
+    refine_rounds: int = 0
+    surrogate: dict[str, Any] = field(default_factory=dict)
+    sobol_n: int = 2**12
+    base_dir: Path = Path(".")
+
+
+def _response(d: Any, where: str) -> Response:
+    if not isinstance(d, Mapping):
+        raise ConfigError(f"{where}: expected a mapping with keys {sorted(RESPONSE_KEYS)}, got {d!r}")
+    unknown = set(d) - RESPONSE_KEYS
+    if unknown:
+        raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}; valid: {sorted(RESPONSE_KEYS)}")
+    for k in ("name", "experiment"):
+        if k not in d:
+            raise ConfigError(f"{where}: missing '{k}'")
+    return Response(name=str(d["name"]), experiment=str(d["experiment"]), scale=str(d.get("scale", "quick")),
+                    settings=dict(d.get("settings") or {}), target=d.get("target"))
+
+
+def load_config(path: str | os.PathLike) -> CampaignConfig:
+    """Read and check a campaign configuration; every error names the offending key."""
+    path = Path(path)
+    if not path.exists():
+        raise ConfigError(f"calibration config not found: {path}")
+    with open(path) as fh:
+        raw = json.load(fh) if path.suffix == ".json" else yaml.safe_load(fh)
+    return parse_config(raw, base_dir=path.parent, source=str(path))
+
+
+def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>") -> CampaignConfig:
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f"{source}: top level must be a mapping")
+    unknown = set(raw) - TOP_KEYS
+    if unknown:
+        raise ConfigError(f"{source}: unknown key(s) {sorted(unknown)}; valid: {sorted(TOP_KEYS)}")
+    for k in ("parameters", "responses"):
+        if k not in raw:
+            raise ConfigError(f"{source}: missing '{k}'")
+    law = wd.ContactLaw(**(raw.get("contact_law") or {"rolling": "epsd"}))
+    params = raw["parameters"]
+    if not isinstance(params, Mapping) or not params:
+        raise ConfigError(f"{source}: 'parameters' must map contact-parameter names to [lower, upper]")
+    plist = []
+    for name, bounds in params.items():
+        law.split_name(name)  # unknown names raise, listing the law's parameters
+        if not (isinstance(bounds, Sequence) and len(bounds) == 2):
+            raise ConfigError(f"{source}: parameters.{name} must be [lower, upper], got {bounds!r}")
+        plist.append(Parameter(name, float(bounds[0]), float(bounds[1])))
+    fixed = {k: float(v) for k, v in (raw.get("fixed") or {}).items()}
+    for k in fixed:
+        law.split_name(k)
+        if k in params:
+            raise ConfigError(f"{source}: '{k}' is both calibrated and fixed")
+    design = dict(raw.get("design") or {})
+    bad = set(design) - {"samples", "held_out", "seed"}
+    if bad:
+        raise ConfigError(f"{source}: design: unknown key(s) {sorted(bad)}; valid: ['held_out', 'samples', 'seed']")
+    cfg = CampaignConfig(
+        name=str(raw.get("name", Path(source).stem)), space=ParameterSpace(tuple(plist)),
+        responses=[_response(r, f"{source}: responses[{i}]") for i, r in enumerate(raw["responses"])],
+        validation=_response(raw["validation"], f"{source}: validation") if raw.get("validation") else None,
+        fixed=fixed, rolling=law.rolling, samples=int(design.get("samples", 24)),
+        held_out=int(design.get("held_out", 6)), seed=int(design.get("seed", 0)),
+        batch_worlds=int(raw.get("batch_worlds", 8)), device=raw.get("device"),
+        output=str(raw.get("output", "results/calibration")), optimisation=dict(raw.get("optimisation") or {}),
+        confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
+        refine_rounds=int((raw.get("confirmation") or {}).get("refine_rounds", 0)),
+        surrogate=dict(raw.get("surrogate") or {}), sobol_n=int((raw.get("sensitivity") or {}).get("n", 2**12)),
+        base_dir=base_dir)
+    if not cfg.responses:
+        raise ConfigError(f"{source}: 'responses' is empty")
+    if not 0 <= cfg.held_out < cfg.samples - len(plist):
+        raise ConfigError(f"{source}: design.held_out ({cfg.held_out}) must leave more training samples than "
+                          f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
+    if cfg.batch_worlds < 1:
+        raise ConfigError(f"{source}: batch_worlds must be >= 1")
+    return cfg
+
+
+# ----------------------------------------------------------------------------- DEM runs
+def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: CampaignConfig,
+                 progress: bool = False) -> list[dict[str, Any]]:
+    """Run one experiment with one world per parameter set; returns one record per world."""
+    exp = make_experiment(resp.experiment, resp.scale, rolling=cfg.rolling, **resp.settings)
+    sets = [{**cfg.fixed, **p} for p in parameter_sets]
+    t0 = time.perf_counter()
+    try:
+        results = exp.run(sets, device=cfg.device, progress=progress)
+    except (wd.StabilityError, wd.ContactOverflowError) as exc:  # the whole batch failed
+        return [dict(status="failed", error=f"{type(exc).__name__}: {exc}", angle_deg=None) for _ in sets]
+    wall = time.perf_counter() - t0
+    out = []
+    for r in results:
+        out.append(dict(status=r.status, error=r.error, angle_deg=r.angle_deg, wall_s=round(wall, 2),
+                        worlds=len(sets), diagnostics={k: v for k, v in r.diagnostics.items()
+                                                       if k in ("n_bins", "std_deg", "residual_rms_m", "thetas_deg")}))
+    return out
+
+
+def resolve_target(resp: Response, cfg: CampaignConfig, log) -> None:
+    """Fill ``resp.target_deg`` from a number, a measurement file, or a DEM run at known parameters."""
+    t = resp.target
+    if t is None:
+        raise ConfigError(f"response '{resp.name}': no target given")
+    if isinstance(t, (int, float)):
+        resp.target_deg, resp.target_source = float(t), "config"
+        return
+    if not isinstance(t, Mapping):
+        raise ConfigError(f"response '{resp.name}': target must be a number or a mapping, got {t!r}")
+    if "file" in t:
+        path = Path(t["file"])
+        if not path.is_absolute() and not path.exists():
+            path = cfg.base_dir / path
+        for k in ("experiment", "condition"):
+            if k not in t:
+                raise ConfigError(f"response '{resp.name}': target from a file needs '{k}'")
+        stats = load_measurements(path).condition(t["experiment"], t["condition"]).stats()
+        resp.target_deg, resp.target_std_deg = float(stats.mean_deg), stats.std_deg
+        resp.target_source = f"{path}: {t['experiment']}/{t['condition']} (n = {stats.n})"
+        return
+    if "dem_at" in t:
+        truth = {k: float(v) for k, v in t["dem_at"].items()}
+        log(f"target '{resp.name}': DEM run at known parameters {truth}")
+        rec = run_response(resp, [truth], cfg)[0]
+        if rec["status"] != "ok":
+            raise ConfigError(f"response '{resp.name}': the DEM run producing the target failed: {rec['error']}")
+        resp.target_deg, resp.target_source = float(rec["angle_deg"]), f"DEM at {truth}"
+        return
+    raise ConfigError(f"response '{resp.name}': target mapping needs 'file' or 'dem_at', got keys {sorted(t)}")
+
+
+# ----------------------------------------------------------------------------- the campaign
+class Campaign:
+    """Runs a :class:`CampaignConfig` end to end, resumably, into ``output``."""
+
+    def __init__(self, cfg: CampaignConfig, output: str | os.PathLike | None = None, verbose: bool = True) -> None:
+        self.cfg = cfg
+        self.out = Path(output or cfg.output)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.verbose = verbose
+        self.samples_path = self.out / "samples.jsonl"
+        self.refine_rounds = cfg.refine_rounds
+
+    def log(self, msg: str) -> None:
+        if self.verbose:
+            print(f"[calibrate {time.strftime('%H:%M:%S')}] {msg}", flush=True)
+
+    def design(self) -> np.ndarray:
+        return latin_hypercube(self.cfg.space, self.cfg.samples, seed=self.cfg.seed)
+
+    def _done(self) -> dict[tuple[int, str], dict]:
+        done: dict[tuple[int, str], dict] = {}
+        if self.samples_path.exists():
+            for line in self.samples_path.read_text().splitlines():
+                if line.strip():
+                    rec = json.loads(line)
+                    done[(rec["index"], rec["response"])] = rec
+        return done
+
+    def run_design(self, progress: bool = True) -> dict[tuple[int, str], dict]:
+        """Run every (sample, response) not yet in ``samples.jsonl``, batch by batch."""
+        X = self.design()
+        names = [p.name for p in self.cfg.space.parameters]
+        done = self._done()
+        for resp in self.cfg.responses:
+            todo = [i for i in range(len(X)) if (i, resp.name) not in done]
+            if not todo:
+                continue
+            self.log(f"{resp.name}: {len(todo)} of {len(X)} samples to run ({resp.experiment}, scale {resp.scale})")
+            bar = None
+            if progress:
+                from tqdm import tqdm
+
+                bar = tqdm(total=len(todo), desc=resp.name, unit="sample")
+            for start in range(0, len(todo), self.cfg.batch_worlds):
+                batch = todo[start:start + self.cfg.batch_worlds]
+                sets = [dict(zip(names, map(float, X[i]))) for i in batch]
+                records = run_response(resp, sets, self.cfg)
+                with open(self.samples_path, "a") as fh:
+                    for i, p, rec in zip(batch, sets, records):
+                        rec = dict(index=i, response=resp.name, parameters=p, **rec)
+                        fh.write(json.dumps(rec) + "\n")
+                        done[(i, resp.name)] = rec
+                if bar is not None:
+                    bar.update(len(batch))
+            if bar is not None:
+                bar.close()
+        return done
+
+    # ------------------------------------------------------------------ analysis
+    def run(self, progress: bool = True) -> dict[str, Any]:
+        from .optimisation import NSGA2Settings, calibrate, plot_acceptable_set
+        from .reports_surrogate import plot_predicted_vs_simulated
+        from .sensitivity import plot_sensitivity, sobol_indices
+        from .surrogates import cross_validated_surrogate, r2_score, relative_errors, rmse
+
+        cfg = self.cfg
+        pnames = [p.name for p in cfg.space.parameters]
+        t_start = time.perf_counter()
+        res: dict[str, Any] = dict(name=cfg.name, parameters=pnames, fixed=cfg.fixed, rolling=cfg.rolling,
+                                   device=str(cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")))
+        for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
+            resolve_target(resp, cfg, self.log)
+            self.log(f"target {resp.name} = {resp.target_deg:.3f} deg ({resp.target_source})")
+        res["targets"] = {r.name: dict(deg=r.target_deg, std_deg=r.target_std_deg, source=r.target_source)
+                          for r in cfg.responses + ([cfg.validation] if cfg.validation else [])}
+        t0 = time.perf_counter()
+        done = self.run_design(progress)
+        res["campaign_wall_s"] = round(time.perf_counter() - t0, 1)
+        X = self.design()
+        rnames = [r.name for r in cfg.responses]
+        Y = np.array([[done[(i, n)]["angle_deg"] if done[(i, n)]["status"] == "ok" else np.nan for n in rnames]
+                      for i in range(len(X))], dtype=float)
+        failed = [dict(index=i, response=n, error=done[(i, n)]["error"]) for i in range(len(X)) for n in rnames
+                  if done[(i, n)]["status"] != "ok"]
+        res["design"] = dict(samples=len(X), held_out=cfg.held_out, seed=cfg.seed, X=X, Y=Y, failed=failed)
+        ok = np.all(np.isfinite(Y), axis=1)
+        n_train = len(X) - cfg.held_out
+        tr = np.arange(len(X)) < n_train
+        if ok[tr].sum() <= len(pnames) + 1:
+            raise RuntimeError(f"only {ok[tr].sum()} successful training samples; see {self.samples_path}")
+        Xtr, Ytr = X[tr & ok], Y[tr & ok]
+        Xte, Yte = X[~tr & ok], Y[~tr & ok]
+        self.log(f"surrogate: cross-validated choice on {len(Xtr)} training samples")
+        sur = cross_validated_surrogate(Xtr, Ytr, space=cfg.space, response_names=rnames, seed=cfg.seed,
+                                        n_splits=int(cfg.surrogate.get("n_splits", min(5, len(Xtr) // 2))),
+                                        n_repeats=int(cfg.surrogate.get("n_repeats", 2)))
+        res["surrogate"] = sur.summary()
+        if len(Xte):
+            P = sur.predict(Xte)
+            res["surrogate"]["held_out"] = dict(n=len(Xte), r2=r2_score(Yte, P), rmse_deg=rmse(Yte, P),
+                                                relative_errors=relative_errors(Yte, P))
+            plot_predicted_vs_simulated(Yte, P, rnames, path=str(self.out / "surrogate_held_out.png"))
+        opt = {k: v for k, v in cfg.optimisation.items() if k in ("pop_size", "n_generations", "seed")}
+        settings = NSGA2Settings(**opt)
+        tol = cfg.optimisation.get("tolerance_deg")
+        targets = [r.target_deg for r in cfg.responses]
+        self.log(f"NSGA-II: population {settings.pop_size}, {settings.n_generations} generations")
+        cal = calibrate(sur, targets, cfg.space, tolerance=tol, settings=settings, response_names=rnames,
+                        n_dense=int(cfg.optimisation.get("n_dense", 50_000)), support_X=Xtr)
+        res["optimisation"] = cal.to_dict()
+        # confirmation: DEM at the compromise (Table 9). If it misses a target by more than the
+        # tolerance, the confirmed point joins the training set and the surrogate and NSGA-II
+        # are redone (sequential refinement), at most ``refine_rounds`` times.
+        tol_deg = np.broadcast_to(np.asarray(cal.tolerance, dtype=float), (len(rnames),))
+        rounds = []
+        for rnd in range(self.refine_rounds + 1):
+            x_best = dict(zip(pnames, map(float, cal.compromise_x)))
+            conf = {}
+            for resp in cfg.responses:
+                recs = run_response(resp, [x_best] * cfg.confirmation_runs, cfg)
+                angles = [r["angle_deg"] for r in recs if r["status"] == "ok"]
+                dem = float(np.mean(angles)) if angles else None
+                conf[resp.name] = dict(
+                    dem_deg=dem, dem_runs=angles, target_deg=resp.target_deg,
+                    surrogate_deg=float(sur.predict(cal.compromise_x[None])[0][rnames.index(resp.name)]),
+                    relative_error_pct=None if dem is None else abs(dem - resp.target_deg) / resp.target_deg * 100,
+                    abs_error_deg=None if dem is None else abs(dem - resp.target_deg),
+                    failed=[r["error"] for r in recs if r["status"] != "ok"])
+                self.log(f"confirmation {resp.name} (round {rnd}): DEM {dem} deg vs target {resp.target_deg:.3f} deg")
+            rounds.append(dict(parameters=x_best, responses=conf))
+            errs = [c["abs_error_deg"] for c in conf.values()]
+            if any(e is None for e in errs) or all(e <= t for e, t in zip(errs, tol_deg)) or rnd == self.refine_rounds:
+                break
+            Xtr = np.vstack([Xtr, cal.compromise_x[None]])
+            Ytr = np.vstack([Ytr, [[conf[n]["dem_deg"] for n in rnames]]])
+            self.log(f"refinement round {rnd + 1}: surrogate refitted with {len(Xtr)} samples")
+            sur = cross_validated_surrogate(Xtr, Ytr, space=cfg.space, response_names=rnames, seed=cfg.seed,
+                                            n_splits=int(cfg.surrogate.get("n_splits", min(5, len(Xtr) // 2))),
+                                            n_repeats=int(cfg.surrogate.get("n_repeats", 2)))
+            cal = calibrate(sur, targets, cfg.space, tolerance=tol, settings=settings, response_names=rnames,
+                            n_dense=int(cfg.optimisation.get("n_dense", 50_000)), support_X=Xtr)
+            res["optimisation"] = cal.to_dict()
+        res["confirmation"] = dict(rounds[-1], rounds=rounds)
+        plot_acceptable_set(cal, path=str(self.out / "acceptable_set.png"))
+        sob = sobol_indices(sur, cfg.space, n=cfg.sobol_n, response_names=rnames)
+        res["sensitivity"] = dict(first_order=sob.first_order, total_order=sob.total_order,
+                                  percent_total=sob.percent_contribution("total"), n=sob.n,
+                                  parameters=sob.parameter_names, responses=sob.response_names)
+        plot_sensitivity(sob, path=str(self.out / "sensitivity.png"))
+        if cfg.validation is not None:
+            v = cfg.validation
+            recs = run_response(v, [rounds[-1]["parameters"]] * cfg.confirmation_runs, cfg)
+            angles = [r["angle_deg"] for r in recs if r["status"] == "ok"]
+            dem = float(np.mean(angles)) if angles else None
+            res["validation"] = dict(experiment=v.experiment, scale=v.scale, dem_deg=dem, measured_deg=v.target_deg,
+                                     measured_std_deg=v.target_std_deg,
+                                     relative_error_pct=None if dem is None else abs(dem - v.target_deg) / v.target_deg * 100,
+                                     failed=[r["error"] for r in recs if r["status"] != "ok"])
+            self.log(f"validation {v.name}: DEM {dem} deg vs measured {v.target_deg:.3f} deg")
+        res["wall_s"] = round(time.perf_counter() - t_start, 1)
+        (self.out / "results.json").write_text(json.dumps(_jsonable(res), indent=1))
+        (self.out / "summary.md").write_text(summary_markdown(res))
+        self.log(f"done in {res['wall_s']} s: {self.out / 'summary.md'}")
+        return res
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, Mapping):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    if hasattr(x, "__dict__") and not isinstance(x, type):
+        return _jsonable(vars(x))
+    return x
+
+
+def summary_markdown(res: Mapping[str, Any]) -> str:
+    """Short Markdown account of a campaign."""
+    lines = [f"# Calibration: {res['name']}", "", f"Parameters calibrated: {', '.join(res['parameters'])}; "
+             f"fixed: {res['fixed']}; rolling model: {res['rolling']}; device: {res['device']}.", "", "## Targets", ""]
+    for n, t in res["targets"].items():
+        lines.append(f"- {n}: {t['deg']:.3f} deg ({t['source']})")
+    d = res["design"]
+    lines += ["", f"## Design: {d['samples']} Latin hypercube samples ({d['held_out']} held out), "
+              f"{len(d['failed'])} failed runs, campaign wall time {res['campaign_wall_s']} s", ""]
+    s = res["surrogate"]
+    if "held_out" in s:
+        r2 = np.atleast_1d(s["held_out"]["r2"])
+        rm = np.atleast_1d(s["held_out"]["rmse_deg"])
+        for k, n in enumerate(res["targets"]):
+            if k < len(r2):
+                lines.append(f"- surrogate {n}: held-out R^2 = {r2[k]:.3f}, RMSE = {rm[k]:.2f} deg")
+    o = res["optimisation"]
+    comp = {k: round(v, 4) for k, v in res["confirmation"]["parameters"].items()}
+    sur = {n: round(c["surrogate_deg"], 3) for n, c in res["confirmation"]["responses"].items()}
+    ranges = {k: [round(float(a), 3) for a in v] for k, v in (o.get("acceptable_ranges") or {}).items()}
+    lines += ["", "## NSGA-II", "", f"- compromise: {comp}", f"- surrogate at the compromise: {sur} deg",
+              f"- acceptable set: {o.get('acceptable_set_size', '?')} parameter sets within tolerance; their ranges "
+              f"(the ambiguity of the calibration): {ranges}", ""]
+    lines += ["## Confirmation (DEM at the compromise)", "", "| response | target | surrogate | DEM | abs. error | rel. error |",
+              "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for n, c in res["confirmation"]["responses"].items():
+        dem = "failed" if c["dem_deg"] is None else f"{c['dem_deg']:.2f}"
+        ae = "-" if c["abs_error_deg"] is None else f"{c['abs_error_deg']:.2f}"
+        re_ = "-" if c["relative_error_pct"] is None else f"{c['relative_error_pct']:.2f} %"
+        lines.append(f"| {n} | {c['target_deg']:.2f} | {c['surrogate_deg']:.2f} | {dem} | {ae} | {re_} |")
+    if "validation" in res:
+        v = res["validation"]
+        dem = "failed" if v["dem_deg"] is None else f"{v['dem_deg']:.2f} deg"
+        rel = "-" if v["relative_error_pct"] is None else f"{v['relative_error_pct']:.2f} %"
+        lines += ["", "## Validation", "", f"- {v['experiment']} ({v['scale']} scale): DEM {dem} vs measured "
+                  f"{v['measured_deg']:.2f} deg, relative error {rel}"]
+    lines += ["", f"Total wall time {res['wall_s']} s.", ""]
+    return "\n".join(lines)
+
+
+def calibrate_main(argv: Sequence[str] | None = None) -> int:
+    """``warpdem calibrate CONFIG [--out DIR] [--device cpu|cuda]``."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="warpdem calibrate", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("config")
+    ap.add_argument("--out", default=None, help="output folder (default: the config's 'output')")
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--no-progress", action="store_true")
+    args = ap.parse_args(argv)
+    cfg = load_config(args.config)
+    if args.device:
+        cfg.device = args.device
+    Campaign(cfg, args.out).run(progress=not args.no_progress)
+    return 0
