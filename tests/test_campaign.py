@@ -1,0 +1,111 @@
+"""Calibration campaign logic: config checking, resume after interruption, failed runs kept,
+recovery of known parameters. The DEM is replaced by an analytic response model here (the
+campaign's plumbing is what is tested); the real end-to-end run is marked slow."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import calibration.campaign as cp
+from warpdem import ConfigError
+
+BASE = {
+    "name": "t", "device": "cpu",
+    "parameters": {"mu_s_pp": [0.1, 0.8], "mu_s_pw": [0.1, 0.8]},
+    "design": {"samples": 16, "held_out": 4, "seed": 1},
+    "batch_worlds": 5,
+    "responses": [
+        {"name": "alpha", "experiment": "baffle", "target": {"dem_at": {"mu_s_pp": 0.5, "mu_s_pw": 0.3}}},
+        {"name": "beta", "experiment": "drum", "target": {"dem_at": {"mu_s_pp": 0.5, "mu_s_pw": 0.3}}},
+    ],
+    "optimisation": {"pop_size": 60, "n_generations": 40, "tolerance_deg": 0.5, "n_dense": 5000},
+    "confirmation": {"runs": 1, "refine_rounds": 2},
+    "sensitivity": {"n": 256},
+}
+
+
+def fake_angle(experiment, p):
+    """A smooth stand-in for the DEM: static angle driven by mu_s_pp, dynamic by mu_s_pw [deg]."""
+    a, b = p["mu_s_pp"], p["mu_s_pw"]
+    if experiment == "baffle":
+        return 15 + 25 * a + 5 * b
+    return 20 + 8 * a + 40 * b - 10 * b * b
+
+
+@pytest.fixture
+def fake_dem(monkeypatch):
+    calls = []
+
+    def run_response(resp, parameter_sets, cfg, progress=False):
+        calls.append((resp.name, len(parameter_sets)))
+        out = []
+        for p in parameter_sets:
+            if p["mu_s_pp"] > 0.78 and resp.name == "beta":  # an unstable run: must be recorded
+                out.append(dict(status="failed", error="StabilityError: test", angle_deg=None))
+            else:
+                out.append(dict(status="ok", error=None, angle_deg=fake_angle(resp.experiment, p)))
+        return out
+
+    monkeypatch.setattr(cp, "run_response", run_response)
+    return calls
+
+
+def test_config_errors_name_the_key(tmp_path):
+    with pytest.raises(ConfigError, match="unknown key"):
+        cp.parse_config({**BASE, "bogus": 1})
+    with pytest.raises(ConfigError, match="mu_q_pp"):
+        cp.parse_config({**BASE, "parameters": {"mu_q_pp": [0, 1]}})
+    with pytest.raises(ConfigError, match="responses\\[0\\].*unknown key"):
+        cp.parse_config({**BASE, "responses": [{"name": "a", "experiment": "baffle", "targt": 3}]})
+    with pytest.raises(ConfigError, match="not found"):
+        cp.load_config(tmp_path / "missing.yaml")
+
+
+def test_campaign_recovers_known_parameters_and_resumes(tmp_path, fake_dem):
+    cfg = cp.parse_config(BASE)
+    res = cp.Campaign(cfg, tmp_path, verbose=False).run(progress=False)
+    conf = res["confirmation"]["responses"]
+    for name, c in conf.items():
+        assert c["abs_error_deg"] <= 0.5, (name, c)
+    # the surrogate generalises on the held-out samples
+    assert np.min(res["surrogate"]["held_out"]["r2"]) > 0.95
+    # the acceptable set contains the true parameters' neighbourhood
+    ranges = res["optimisation"]["acceptable_ranges"]
+    assert ranges["mu_s_pp"][0] <= 0.5 <= ranges["mu_s_pp"][1]
+    lines = (tmp_path / "samples.jsonl").read_text().splitlines()
+    assert len(lines) == 2 * 16
+    assert (tmp_path / "summary.md").exists() and json.loads((tmp_path / "results.json").read_text())
+    # resume: nothing is re-run for samples already recorded
+    n_calls = len(fake_dem)
+    cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
+    assert len(fake_dem) == n_calls
+
+
+def test_interrupted_campaign_loses_nothing(tmp_path, fake_dem):
+    cfg = cp.parse_config(BASE)
+    camp = cp.Campaign(cfg, tmp_path, verbose=False)
+    done = camp.run_design(progress=False)
+    lines = (tmp_path / "samples.jsonl").read_text().splitlines()
+    # simulate a stop after the first 7 records
+    (tmp_path / "samples.jsonl").write_text("\n".join(lines[:7]) + "\n")
+    fake_dem.clear()
+    again = cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
+    assert sorted(again) == sorted(done)
+    assert sum(n for _, n in fake_dem) == len(lines) - 7
+
+
+def test_failed_runs_recorded_not_dropped(tmp_path, fake_dem):
+    cfg = cp.parse_config({**BASE, "parameters": {"mu_s_pp": [0.5, 0.8], "mu_s_pw": [0.1, 0.8]}})
+    done = cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
+    failed = [r for r in done.values() if r["status"] == "failed"]
+    assert failed and all("StabilityError" in r["error"] for r in failed)
+
+
+@pytest.mark.slow
+def test_quick_config_end_to_end(tmp_path):
+    """The README's calibration: DEM targets at known parameters are matched within 1.5 deg."""
+    cfg = cp.load_config(Path(__file__).parents[1] / "calibration" / "configs" / "quick_calibration.yaml")
+    res = cp.Campaign(cfg, tmp_path, verbose=False).run(progress=False)
+    for c in res["confirmation"]["responses"].values():
+        assert c["abs_error_deg"] is not None and c["abs_error_deg"] <= 1.5
