@@ -509,13 +509,20 @@ def contact_kernel(law: ContactLaw):
                         else:
                             partner_out[base + s] = SLOT_EMPTY
                 if keep == 1:
-                    if n_new < max_contacts:
-                        partner_out[base + n_new] = tag
-                        wnormal_out[base + n_new] = nrm
-                        slot_depth[base + n_new] = depth
-                        slot_point[base + n_new] = cp
-                        slot_tri[base + n_new] = tri
-                        n_new += 1
+                    # reuse a slot emptied above (many triangles meeting at a vertex must not
+                    # exhaust the slots with replaced candidates), else append
+                    slot = n_new
+                    for s in range(n_new):
+                        if slot == n_new and partner_out[base + s] == SLOT_EMPTY:
+                            slot = s
+                    if slot < max_contacts:
+                        partner_out[base + slot] = tag
+                        wnormal_out[base + slot] = nrm
+                        slot_depth[base + slot] = depth
+                        slot_point[base + slot] = cp
+                        slot_tri[base + slot] = tri
+                        if slot == n_new:
+                            n_new += 1
                     else:
                         wp.atomic_add(overflow, 0, 1)
         # compact the wall slots (drop the ones replaced by deeper related contacts)

@@ -1,0 +1,223 @@
+"""``warpdem experiment CONFIG``: run one standard experiment from a YAML/JSON config, print
+and save the results (JSON) and one picture of the fitted profile per world.
+
+Config (SI units; see calibration/configs/quick_*.yaml)::
+
+    experiment: baffle            # baffle | drum | cylinder
+    scale: quick                  # paper | quick (drum also: short)
+    device: cpu                   # optional (default: Warp's default device)
+    output: results/quick_baffle  # optional (default: experiment_<name>_<scale>)
+    material: {type: spheres, diameter: [0.024, 0.030]}   # optional
+    settings: {lift_speed: 0.2}   # optional: any setting of the experiment
+    parameters:                   # one world per entry (or a mapping of equal-length lists)
+      - {mu_s_pp: 0.3, mu_s_pw: 0.3, mu_r_pp: 0.05, mu_r_pw: 0.05}
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from warpdem import ConfigError
+
+from . import EXPERIMENTS, ExperimentResult, make_experiment
+
+__all__ = ["experiment_main", "load_config", "run_config", "plot_result"]
+
+CONFIG_KEYS = ("experiment", "scale", "device", "output", "material", "settings", "parameters", "progress",
+               "description")
+
+
+def load_config(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a YAML or JSON experiment config and check its top-level keys."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"experiment config {str(p)!r} does not exist")
+    text = p.read_text()
+    if p.suffix.lower() == ".json":
+        cfg = json.loads(text)
+    else:
+        import yaml
+
+        cfg = yaml.safe_load(text)
+    return check_config(cfg, str(p))
+
+
+def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
+    """Validate the top level of a config mapping (unknown keys raise ConfigError)."""
+    if not isinstance(cfg, Mapping):
+        raise ConfigError(f"{source}: an experiment config must be a mapping, got {type(cfg).__name__}")
+    unknown = sorted(set(cfg) - set(CONFIG_KEYS))
+    if unknown:
+        raise ConfigError(f"{source}: unknown key(s) {unknown}; valid: {list(CONFIG_KEYS)}")
+    if "experiment" not in cfg:
+        raise ConfigError(f"{source}: missing 'experiment' (one of {sorted(EXPERIMENTS)})")
+    if cfg["experiment"] not in EXPERIMENTS:
+        raise ConfigError(f"{source}: unknown experiment {cfg['experiment']!r}; valid: {sorted(EXPERIMENTS)}")
+    if "parameters" not in cfg:
+        raise ConfigError(f"{source}: missing 'parameters' (a list of per-world contact parameter sets)")
+    settings = cfg.get("settings") or {}
+    if not isinstance(settings, Mapping):
+        raise ConfigError(f"{source}: 'settings' must be a mapping of experiment settings")
+    if "material" in settings and "material" in cfg:
+        raise ConfigError(f"{source}: give 'material' either at the top level or in 'settings', not both")
+    if "scale" in settings:
+        raise ConfigError(f"{source}: put 'scale' at the top level, not in 'settings'")
+    return dict(cfg)
+
+
+def run_config(cfg: Mapping[str, Any], device: str | None = None, progress: bool | None = None
+               ) -> tuple[list[ExperimentResult], Any]:
+    """Build the experiment of a checked config and run it; returns (results, experiment)."""
+    settings = dict(cfg.get("settings") or {})
+    if cfg.get("material") is not None:
+        settings["material"] = cfg["material"]
+    exp = make_experiment(cfg["experiment"], cfg.get("scale", "paper"), **settings)
+    results = exp.run(cfg["parameters"], device=device or cfg.get("device"),
+                      progress=bool(cfg.get("progress", False) if progress is None else progress))
+    return results, exp
+
+
+# --------------------------------------------------------------------------- pictures
+def _draw_particles(ax, x, r, h_axis: int, keep) -> None:
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Circle
+
+    patches = [Circle((p[h_axis], p[2]), q) for p, q in zip(x[keep], r[keep])]
+    ax.add_collection(PatchCollection(patches, facecolor="0.7", edgecolor="0.3", linewidths=0.3))
+
+
+def _draw_fit(ax, fit, label: str, color: str = "tab:red", sign: float = 1.0, h0: float = 0.0) -> None:
+    import numpy as np
+
+    p = fit.profile
+    ok = p.counts > 0
+    ax.plot(h0 + sign * p.centres[ok], p.heights[ok], ".", color="tab:blue", ms=4, label="bin heights")
+    xs = np.array([fit.x_fit.min(), fit.x_fit.max()])
+    ax.plot(h0 + sign * xs, fit.slope * xs + fit.intercept, "-", color=color, lw=2,
+            label=f"{label}: {fit.angle_deg:.1f} deg, {fit.n_bins} bins")
+    if fit.z_band is not None:
+        for z in fit.z_band:
+            ax.axhline(z, color="0.5", lw=0.6, ls=":")
+
+
+def plot_result(result: ExperimentResult, path: str | os.PathLike) -> None:
+    """Side view of the world's particles with the surface bins and fitted line(s) (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    s = result.protocol.get("settings", {})
+    title = (f"{result.experiment} ({result.scale}) world {result.world}: "
+             + (f"{result.angle_name} = {result.angle_deg:.2f} deg" if result.ok else f"FAILED: {result.error}"))
+    params = ", ".join(f"{k}={v:g}" for k, v in result.parameters.items())
+    if result.experiment == "cylinder":
+        fig, axs = plt.subplots(1, 2, figsize=(12, 4.5))
+    else:
+        fig, axs = plt.subplots(1, 1, figsize=(10, 5))
+        axs = [axs]
+    if result.particles is not None:
+        x, r = (np.asarray(a, dtype=float) for a in result.particles)
+    else:
+        x, r = np.zeros((0, 3)), np.zeros(0)
+    if result.experiment == "baffle":
+        ax = axs[0]
+        y0, y1 = s.get("measure_y", (0.03, 0.17))
+        _draw_particles(ax, x, r, 0, (x[:, 1] >= y0) & (x[:, 1] <= y1))
+        if result.fit is not None:
+            _draw_fit(ax, result.fit, "alpha")
+        ax.axvline(s.get("box_length", 0.3), color="k", lw=1, ls="--")
+        ax.set_xlim(-0.01, s.get("floor_length", 0.7))
+    elif result.experiment == "drum":
+        ax = axs[0]
+        y0, y1 = s.get("measure_y", (0.03, 0.12))
+        _draw_particles(ax, x, r, 0, (x[:, 1] >= y0) & (x[:, 1] <= y1))
+        R = 0.5 * s.get("diameter", 0.3)
+        t = np.linspace(0, 2 * np.pi, 200)
+        ax.plot(R * np.cos(t), R * np.sin(t), "k-", lw=1)
+        c = 0.5 * s.get("crop_side", 0.15)
+        ax.plot([-c, c, c, -c, -c], [-c, -c, c, c, -c], "k--", lw=0.8)
+        if result.fit is not None:
+            _draw_fit(ax, result.fit.fits[-1], "last snapshot")
+            d = result.diagnostics
+            ax.text(0.02, 0.02, f"beta = atan|mean slope| = {result.fit.angle_deg:.2f} deg; snapshots "
+                    f"{d.get('snapshot_mean_deg', float('nan')):.2f} +- {d.get('snapshot_std_deg', float('nan')):.2f} deg",
+                    transform=ax.transAxes, fontsize=8)
+        ax.set_xlim(-R - 0.01, R + 0.01)
+        ax.set_ylim(-R - 0.01, R + 0.01)
+    elif result.experiment == "cylinder":
+        d_mean = result.diagnostics.get("mean_diameter_m", float(2 * r.mean()) if r.size else 0.02)
+        for k, (ax, plane) in enumerate(zip(axs, ("xz", "yz"))):
+            other = 1 if plane == "xz" else 0
+            h_axis = 0 if plane == "xz" else 1
+            _draw_particles(ax, x, r, h_axis, np.abs(x[:, other]) < d_mean)
+            if result.fit is not None:
+                _draw_fit(ax, result.fit.fits[2 * k], f"+{plane[0]}", "tab:red", 1.0)
+                _draw_fit(ax, result.fit.fits[2 * k + 1], f"-{plane[0]}", "tab:orange", -1.0)
+            ax.set_title(f"{plane} plane")
+            ax.set_xlim(-0.5 * s.get("plate_size", 1.0), 0.5 * s.get("plate_size", 1.0))
+    for ax in axs:
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_xlabel("horizontal [m]")
+        ax.set_ylabel("z [m]")
+        handles, labels = ax.get_legend_handles_labels()
+        uniq = dict(zip(labels, handles))
+        if uniq:
+            ax.legend(uniq.values(), uniq.keys(), fontsize=7, loc="upper right")
+    fig.suptitle(f"{title}\n{params}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# --------------------------------------------------------------------------- main
+def experiment_main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``warpdem experiment``; returns the exit status (0: every world measured,
+    1: some world failed, 2: configuration error)."""
+    ap = argparse.ArgumentParser(prog="warpdem experiment", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("config", help="YAML or JSON experiment config")
+    ap.add_argument("--device", help="override the config's device (cpu, cuda, cuda:0)")
+    ap.add_argument("--output", help="override the config's output directory")
+    ap.add_argument("--progress", action="store_true", help="print protocol phases to stderr")
+    ap.add_argument("--no-plots", action="store_true", help="do not write the per-world pictures")
+    args = ap.parse_args(argv)
+    try:
+        cfg = load_config(args.config)
+        results, exp = run_config(cfg, device=args.device, progress=args.progress or None)
+    except ConfigError as exc:
+        print(f"warpdem experiment: configuration error: {exc}", file=sys.stderr)
+        return 2
+    out = Path(args.output or cfg.get("output") or f"experiment_{cfg['experiment']}_{cfg.get('scale', 'paper')}")
+    out.mkdir(parents=True, exist_ok=True)
+    doc = {"config": cfg, "config_file": str(args.config), "experiment": exp.name, "scale": exp.scale,
+           "results": [r.to_dict() for r in results]}
+    (out / "results.json").write_text(json.dumps(doc, indent=1))
+    if not args.no_plots:
+        for r in results:
+            plot_result(r, out / f"world_{r.world:03d}.png")
+    for r in results:
+        line = {"experiment": r.experiment, "scale": r.scale, "world": r.world, "status": r.status,
+                r.angle_name: None if r.angle_deg is None else round(r.angle_deg, 3), "parameters": r.parameters}
+        if r.bulk_density is not None:
+            line["bulk_density"] = round(r.bulk_density, 1)
+        if r.experiment == "drum" and r.ok:
+            line["snapshot_std_deg"] = round(r.diagnostics["snapshot_std_deg"], 3)
+        if r.experiment == "cylinder" and r.ok:
+            line["thetas_deg"] = [round(t, 3) for t in r.diagnostics["thetas_deg"]]
+        if not r.ok:
+            line["error"] = r.error
+        print(json.dumps(line))
+    t = results[0].timing
+    print(json.dumps({"output": str(out), "wall_s": t["wall_s"], "steps": t["steps"], "simulated_s": t["simulated_s"],
+                      "spheres": t["spheres"], "worlds": t["worlds"], "device": t["device"]}))
+    return 0 if all(r.ok for r in results) else 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(experiment_main())

@@ -1,0 +1,492 @@
+"""Shared machinery of the standard experiments (spec: /work/shared/spec/experiments.md).
+
+One :meth:`Experiment.run` builds ONE :class:`warpdem.Model` with one world per parameter
+set (same loose fill and shared walls in every world, per-world contact parameters),
+runs the experiment's protocol and measures each world with
+:mod:`calibration.measurement`.
+
+Protocol clock: wall motions are part of the immutable model, so their start time must be
+known when it is built. Every experiment starts its motion at ``t_motion`` = the fill's
+largest settling time; when the fill settles earlier the state's clock is moved forward
+to ``t_motion`` (walls are at rest before their start, so nothing else depends on time).
+Reported simulated times are the phases actually simulated, without the jump.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+import trimesh
+
+import warpdem as wd
+from warpdem import ConfigError, ContactOverflowError, StabilityError
+
+from ..filling import (FillResult, active_bodies, active_spheres, add_fill, pour_fill, random_fill, run_for,
+                       settle)
+from ..materials import BulkMaterial, sample_particles
+from ..measurement import MeasurementError
+
+__all__ = ["Experiment", "ExperimentResult", "RunContext", "normalize_parameter_sets", "rectangle",
+           "fit_to_dict"]
+
+G = 9.81
+
+
+# --------------------------------------------------------------------------- meshes
+def rectangle(corner, u, v, subdivisions: int = 1) -> trimesh.Trimesh:
+    """Planar rectangle ``corner + s u + t v`` (s, t in [0, 1]) [m], 2 triangles per cell."""
+    c, u, v = (np.asarray(a, dtype=float) for a in (corner, u, v))
+    if np.linalg.norm(np.cross(u, v)) == 0:
+        raise ConfigError(f"rectangle: edges {u.tolist()} and {v.tolist()} are parallel")
+    k = int(subdivisions)
+    s = np.linspace(0.0, 1.0, k + 1)
+    gs, gt = np.meshgrid(s, s, indexing="ij")
+    verts = c + gs.reshape(-1, 1) * u + gt.reshape(-1, 1) * v
+    faces = []
+    for i in range(k):
+        for j in range(k):
+            a = i * (k + 1) + j
+            faces += [[a, a + k + 1, a + k + 2], [a, a + k + 2, a + 1]]
+    return trimesh.Trimesh(verts, np.array(faces), process=False)
+
+
+# --------------------------------------------------------------------------- parameters
+def normalize_parameter_sets(parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any],
+                             parameter_names: Sequence[str]) -> list[dict[str, float]]:
+    """One dict per world from a list of dicts, a dict of equal-length arrays, or one dict of
+    scalars (one world). Names must be among ``parameter_names`` (the model's contact law)."""
+    if isinstance(parameter_sets, Mapping):
+        if not parameter_sets:
+            raise ConfigError("parameter sets: empty mapping; give at least one world")
+        arrays = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in parameter_sets.items()}
+        lengths = {k: a.size for k, a in arrays.items()}
+        if len(set(lengths.values())) != 1:
+            raise ConfigError(f"parameter sets: arrays differ in length {lengths}")
+        n = next(iter(lengths.values()))
+        sets = [{k: float(a[i]) for k, a in arrays.items()} for i in range(n)]
+    else:
+        sets = [dict(s) for s in parameter_sets]
+        if not sets:
+            raise ConfigError("parameter sets: empty list; give at least one world (an empty dict uses defaults)")
+    valid = list(parameter_names)
+    for w, s in enumerate(sets):
+        for k, v in s.items():
+            if k not in valid:
+                raise ConfigError(f"parameter set {w}: unknown contact parameter '{k}'; this contact law has {valid}")
+            if not math.isfinite(float(v)):
+                raise ConfigError(f"parameter set {w}: '{k}' must be finite, got {v}")
+            s[k] = float(v)
+    return sets
+
+
+# --------------------------------------------------------------------------- results
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        return float(x) if math.isfinite(float(x)) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.bool_,)):
+        return bool(x)
+    if isinstance(x, BulkMaterial):
+        return _jsonable(x.describe())
+    if isinstance(x, wd.Material):
+        return dataclasses.asdict(x)
+    return x
+
+
+def fit_to_dict(fit) -> dict[str, Any]:
+    """JSON-able diagnostics of a :class:`~calibration.measurement.ProfileFit` (lengths in m)."""
+    p = fit.profile
+    return {"angle_deg": fit.angle_deg, "slope": fit.slope, "intercept_m": fit.intercept,
+            "residual_rms_m": fit.residual_rms, "n_bins": fit.n_bins,
+            "z_band_m": None if fit.z_band is None else list(fit.z_band),
+            "x_fit_m": fit.x_fit, "z_fit_m": fit.z_fit, "profile_x_m": p.centres, "profile_z_m": p.heights,
+            "profile_counts": p.counts}
+
+
+@dataclass
+class ExperimentResult:
+    """Outcome of one world of an experiment run.
+
+    status: "ok" or "failed" (``error`` holds the message; a failed world is never dropped).
+    angle_deg: the experiment's angle (``angle_name``: alpha_AoR_S, beta_AoR_D or gamma_s) [deg].
+    bulk_density: fill bulk density [kg/m^3] where the spec asks for it (A), else None.
+    diagnostics: fits, profile points, residuals, bin counts, snapshot spread, settling.
+    timing: wall seconds, steps, simulated time [s] of the whole run (shared by its worlds).
+    protocol: the experiment's settings, scale label and deviations from the paper scale.
+    fit: the measurement object (ProfileFit / DrumResult / CylinderPileResult), not serialised.
+    particles: (centres (m, 3), radii (m,)) [m] of the world at the final measurement, for plots.
+    """
+
+    experiment: str
+    scale: str
+    world: int
+    parameters: dict[str, float]
+    contact_parameters: dict[str, float]
+    status: str = "ok"
+    error: str | None = None
+    angle_name: str = ""
+    angle_deg: float | None = None
+    bulk_density: float | None = None
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    timing: dict[str, Any] = field(default_factory=dict)
+    protocol: dict[str, Any] = field(default_factory=dict)
+    fit: Any = field(default=None, repr=False)
+    particles: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def fail(self, message: str) -> None:
+        self.status, self.error, self.angle_deg = "failed", message, None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict (NaN -> None; ``fit`` and ``particles`` left out)."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("fit", "particles")}
+        return _jsonable(d)
+
+
+# --------------------------------------------------------------------------- run context
+class RunContext:
+    """What a protocol needs during a run: the simulation, phase bookkeeping, read-backs."""
+
+    def __init__(self, experiment: "Experiment", sim: wd.Simulation, fills: list[FillResult],
+                 progress: bool) -> None:
+        self.exp = experiment
+        self.sim = sim
+        self.model = sim.model
+        self.fills = fills
+        self.num_worlds = sim.model.num_worlds
+        self.progress = progress
+        self.phases: dict[str, float] = {}
+        self.diag: list[dict[str, Any]] = [dict() for _ in range(self.num_worlds)]
+        self.errors: list[str | None] = [None] * self.num_worlds
+        self._t0 = time.perf_counter()
+
+    def fill(self, world: int) -> FillResult:
+        return self.fills[world if len(self.fills) > 1 else 0]
+
+    def log(self, msg: str) -> None:
+        if self.progress:
+            print(f"[{self.exp.name} {time.perf_counter() - self._t0:7.1f} s wall, t={self.sim.time:6.3f} s] {msg}",
+                  file=sys.stderr, flush=True)
+
+    def _phase(self, name: str, seconds: float) -> None:
+        self.phases[name] = self.phases.get(name, 0.0) + float(seconds)
+
+    def settle(self, name: str, max_time: float, min_time: float = 0.0, remove_box=None):
+        """Spec "settled" criterion (KE per particle < ``ke_per_particle`` or ``max_time``)."""
+        rep = settle(self.sim, self.exp.ke_per_particle, max_time, min_time, self.exp.settle_check_interval,
+                     remove_box)
+        self._phase(name, rep.time)
+        for w in range(self.num_worlds):
+            self.diag[w][f"{name}_ke_per_particle_J"] = float(rep.ke_per_particle[w])
+            self.diag[w][f"{name}_settled"] = bool(rep.ke_per_particle[w] < self.exp.ke_per_particle)
+        self.log(f"{name}: {rep.time:.3f} s simulated, settled={rep.settled}, max KE/particle "
+                 f"{rep.ke_per_particle.max():.2e} J")
+        return rep
+
+    def advance(self, name: str, duration: float, remove_box=None) -> None:
+        steps, removed = run_for(self.sim, duration, remove_box, self.exp.removal_interval)
+        self._phase(name, steps * self.sim.dt)
+        self.log(f"{name}: {steps * self.sim.dt:.3f} s simulated, {removed} particle(s) removed")
+
+    def advance_to(self, name: str, t: float, remove_box=None) -> None:
+        """Advance until the clock reads ``t`` [s] (to the nearest step)."""
+        self.advance(name, t - self.sim.time, remove_box)
+
+    def jump_clock(self, t: float) -> None:
+        """Move the clock forward to ``t`` [s] (module docstring, "Protocol clock")."""
+        now = self.sim.time
+        if t < now - 0.5 * self.sim.dt:
+            raise RuntimeError(f"protocol clock: cannot move back from {now} s to {t} s")
+        self.sim.state.time.assign(np.array([t], dtype=np.float64))
+
+    def world_spheres(self, world: int, positions: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        return active_spheres(self.sim, world, positions)
+
+    def world_bodies(self, world: int) -> tuple[np.ndarray, np.ndarray]:
+        return active_bodies(self.sim, world)
+
+    def measure(self, world: int, what: str, fn, *args, **kwargs):
+        """Call a measurement; a MeasurementError marks the world failed (returns None)."""
+        if self.errors[world] is not None:
+            return None
+        try:
+            return fn(*args, **kwargs)
+        except MeasurementError as exc:
+            self.errors[world] = f"{what}: {exc}"
+            return None
+
+    def removed_per_world(self) -> np.ndarray:
+        act = self.sim.state.body_active.numpy()
+        return np.bincount(self.model.host["body_world"], weights=1 - act, minlength=self.num_worlds).astype(int)
+
+
+# --------------------------------------------------------------------------- base class
+@dataclass
+class Experiment:
+    """Settings shared by all experiments (SI units).
+
+    scale: "paper" (the spec's defaults) or "quick" (fewer, larger particles, shorter protocol;
+        labelled in every result). material: a BulkMaterial (None: the scale's default).
+    rolling: rolling-resistance model of the contact law ("epsd" default, "cdt", "none").
+    contact_defaults: parameters applied to every world before its own set (spec "Default
+        material": restitution 0.6 for all pairs).
+    dt: time step [s] (None: ``warpdem.time_step_limits(model).recommended``); v_ref: impact
+        speed of the stability check [m/s]; force_dt: accept dt above the limit.
+    ke_per_particle: settled criterion [J] (spec A: 1e-6); fill_settle_max_time [s] (spec A: 1.5;
+        extended by the fall time when the loose column stands above the walls).
+    settle_check_interval, removal_interval: [s] between KE checks / removals of escaped particles.
+    max_contacts: contact slots per sphere. seed: fill RNG seed. fill_per_world: a different
+        loose fill in every world (default: the same fill everywhere).
+    """
+
+    name: ClassVar[str] = "experiment"
+    angle_name: ClassVar[str] = ""
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {"paper": {}}
+
+    scale: str = "paper"
+    material: BulkMaterial | None = None
+    rolling: str = "epsd"
+    contact_defaults: dict[str, float] = field(default_factory=lambda: {"restitution_pp": 0.6, "restitution_pw": 0.6})
+    dt: float | None = None
+    v_ref: float = 2.0
+    force_dt: bool = False
+    ke_per_particle: float = 1.0e-6
+    fill_settle_max_time: float = 1.5
+    settle_check_interval: float = 0.02
+    removal_interval: float = 0.05
+    max_contacts: int = 16
+    seed: int = 0
+    fill_per_world: bool = False
+    wall_material: wd.Material = wd.PLEXIGLAS
+
+    # ------------------------------------------------------------------ config
+    @classmethod
+    def field_names(cls) -> list[str]:
+        return [f.name for f in dataclasses.fields(cls)]
+
+    @classmethod
+    def from_config(cls, scale: str = "paper", **overrides: Any) -> "Experiment":
+        """The ``scale`` preset with ``overrides`` (any field; ``material`` may be a mapping for
+        :meth:`BulkMaterial.from_config`). Unknown keys raise ConfigError."""
+        if scale not in cls.PRESETS:
+            raise ConfigError(f"{cls.name}: unknown scale {scale!r}; valid: {sorted(cls.PRESETS)}")
+        names = cls.field_names()
+        unknown = sorted(set(overrides) - set(names))
+        if unknown:
+            raise ConfigError(f"{cls.name}: unknown setting(s) {unknown}; valid: {sorted(n for n in names if n != 'scale')}")
+        kw = {**cls.PRESETS[scale], **overrides, "scale": scale}
+        return cls(**kw)
+
+    def __post_init__(self) -> None:
+        if self.scale not in self.PRESETS:
+            raise ConfigError(f"{self.name}: unknown scale {self.scale!r}; valid: {sorted(self.PRESETS)}")
+        if isinstance(self.material, Mapping):
+            self.material = BulkMaterial.from_config(self.material)
+        elif self.material is not None and not isinstance(self.material, BulkMaterial):
+            raise ConfigError(f"{self.name}: material must be a BulkMaterial or a mapping, got {type(self.material).__name__}")
+        if isinstance(self.wall_material, Mapping):
+            self.wall_material = wd.Material(**self.wall_material)
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, list):  # YAML lists -> tuples for tuple fields
+                setattr(self, f.name, tuple(v))
+        self._check_positive("v_ref", "ke_per_particle", "settle_check_interval", "removal_interval")
+        self._check_nonnegative("fill_settle_max_time")
+        if self.dt is not None:
+            self._check_positive("dt")
+        if int(self.max_contacts) < 1:
+            raise ConfigError(f"{self.name}: max_contacts must be >= 1, got {self.max_contacts}")
+        wd.ContactLaw(rolling=self.rolling)  # raises a ConfigError for an unknown model
+        if not isinstance(self.contact_defaults, Mapping):
+            raise ConfigError(f"{self.name}: contact_defaults must be a mapping of parameter names to values")
+        self.validate()
+
+    def validate(self) -> None:
+        """Experiment-specific checks (override)."""
+
+    def _check_positive(self, *names: str) -> None:
+        for n in names:
+            v = getattr(self, n)
+            if v is None or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"{self.name}: {n} must be a positive finite number (SI units), got {v!r}")
+
+    def _check_nonnegative(self, *names: str) -> None:
+        for n in names:
+            v = getattr(self, n)
+            if v is None or not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"{self.name}: {n} must be a finite number >= 0, got {v!r}")
+
+    def _check_range(self, name: str, lo_hi_within: tuple[float, float] | None = None) -> None:
+        v = getattr(self, name)
+        if not (isinstance(v, tuple) and len(v) == 2 and all(math.isfinite(float(x)) for x in v) and v[1] > v[0]):
+            raise ConfigError(f"{self.name}: {name} must be a pair (low, high) with low < high, got {v!r}")
+        if lo_hi_within is not None and not (lo_hi_within[0] <= v[0] and v[1] <= lo_hi_within[1]):
+            raise ConfigError(f"{self.name}: {name} {v} must lie within {lo_hi_within}")
+
+    def settings(self) -> dict[str, Any]:
+        """All settings as a JSON-able dict."""
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["material"] = self.bulk_material().describe()
+        return _jsonable(d)
+
+    def deviations_from_paper(self) -> dict[str, Any]:
+        """Settings that differ from the paper-scale defaults (what makes a quick run quick)."""
+        ref = type(self).from_config("paper")
+        out = {}
+        for f in dataclasses.fields(self):
+            if f.name in ("scale", "material"):
+                continue
+            a, b = getattr(self, f.name), getattr(ref, f.name)
+            if a != b:
+                out[f.name] = {"value": _jsonable(a), "paper": _jsonable(b)}
+        paper_label = ref.material.name if ref.material is not None else self.DEFAULT_MATERIAL_LABEL
+        if self.material is not None and (ref.material is None or self.material != ref.material):
+            out["material"] = {"value": self.material.name, "paper": paper_label}
+        return out
+
+    DEFAULT_MATERIAL_LABEL: ClassVar[str] = "gravel clumps (medium fill)"
+
+    def default_material(self) -> BulkMaterial:
+        """Paper scale: the seed paper's gravel clump mix (medium fill, spec "Default material")."""
+        return BulkMaterial.gravel("medium")
+
+    def bulk_material(self) -> BulkMaterial:
+        """``material``, or the default material (built once, not stored in ``material``)."""
+        if self.material is not None:
+            return self.material
+        if getattr(self, "_default_material", None) is None:
+            self._default_material = self.default_material()
+        return self._default_material
+
+    # ------------------------------------------------------------------ hooks
+    def fill_region(self):
+        raise NotImplementedError
+
+    def fill_amount(self, material: BulkMaterial) -> dict[str, float]:
+        """``{"mass": kg}`` or ``{"n": count}`` for :func:`sample_particles`."""
+        raise NotImplementedError
+
+    def add_walls(self, builder: wd.ModelBuilder, fill_top: float, t_motion: float, material: BulkMaterial) -> None:
+        raise NotImplementedError
+
+    def protocol(self, ctx: RunContext, t_motion: float) -> list[dict[str, Any]]:
+        """Run the protocol; return per world ``{"angle": float, "fit": obj, "bulk_density": ...}``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ run
+    def fill_walls(self, builder: wd.ModelBuilder) -> None:
+        """Static walls around a closed fill region, for :func:`~calibration.filling.pour_fill`."""
+        raise NotImplementedError(f"{self.name}: no walls for a staged fill")
+
+    def make_fill(self, material: BulkMaterial, rng: np.random.Generator, device: str | None = None) -> FillResult:
+        """Loose fill (spec "Fill"); a closed region that one pass cannot hold is poured in stages."""
+        sample = sample_particles(material, rng=rng, **self.fill_amount(material))
+        region = self.fill_region()
+        if region.open_top:
+            return random_fill(region, sample, rng)
+        return pour_fill(region, sample, self.fill_walls, rng, device, self.ke_per_particle,
+                         self.fill_settle_max_time, rolling=self.rolling)
+
+    def fill_settle_times(self, fills: list[FillResult]) -> tuple[float, float]:
+        """(min_time, max_time) [s] of the fill's settling: at least the free-fall time of the
+        loose column's top; the spec's maximum is extended by it when the column stands above
+        the walls' nominal height."""
+        floor = min(f.region.bounds[0][2] for f in fills)
+        t_fall = max(math.sqrt(2.0 * max(f.top - floor, 0.0) / G) for f in fills)
+        extra = t_fall if any(f.above_region for f in fills) else 0.0
+        max_time = self.fill_settle_max_time + extra
+        return min(t_fall, max_time), max_time
+
+    def run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None = None,
+            progress: bool = False) -> list[ExperimentResult]:
+        """Run the experiment, one world per parameter set (contact parameters by the model's
+        names, e.g. ``mu_s_pp``); returns one :class:`ExperimentResult` per world, in order."""
+        wall0 = time.perf_counter()
+        law = wd.ContactLaw(rolling=self.rolling)
+        sets = normalize_parameter_sets(parameter_sets, law.parameter_names)
+        defaults = normalize_parameter_sets([self.contact_defaults], law.parameter_names)[0]
+        nw = len(sets)
+        material = self.bulk_material()
+        if self.fill_per_world:
+            fills = [self.make_fill(material, np.random.default_rng([self.seed, w]), device) for w in range(nw)]
+        else:
+            fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
+        builder = wd.ModelBuilder(num_worlds=nw, contact_law=law, max_contacts=self.max_contacts)
+        builder.add_material(material.particle)
+        if self.wall_material.name != material.particle.name:
+            builder.add_material(self.wall_material)
+        for w in range(nw):
+            add_fill(builder, fills[w if self.fill_per_world else 0], material.particle.name, w)
+        _, t_motion = self.fill_settle_times(fills)
+        self.add_walls(builder, max(f.top for f in fills), t_motion, material)
+        if defaults:
+            builder.set_contact_parameters(**defaults)
+        for w, ps in enumerate(sets):
+            if ps:
+                builder.set_contact_parameters(world=w, **ps)
+        # a settled (poured) fill starts with its contacts' small Hertz overlaps: check leniently
+        model = builder.finalize(device, overlap_tolerance=1.0 if any(f.settled for f in fills) else 0.05)
+        limits = wd.time_step_limits(model, self.v_ref)
+        dt = self.dt if self.dt is not None else limits.recommended
+        sim = wd.Simulation(model, dt, v_ref=self.v_ref, force=self.force_dt)
+        ctx = RunContext(self, sim, fills, progress)
+        ctx.log(f"{nw} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, dt={dt:.3g} s "
+                f"(limit {limits.limit:.3g} s)")
+        build_s = time.perf_counter() - wall0
+        sim0 = time.perf_counter()
+        outcome: list[dict[str, Any]] = [dict() for _ in range(nw)]
+        fatal = None
+        try:
+            outcome = self.protocol(ctx, t_motion)
+        except (StabilityError, ContactOverflowError) as exc:
+            fatal = f"{type(exc).__name__}: {exc}"
+        sim_s = time.perf_counter() - sim0
+        timing = {"wall_s": round(time.perf_counter() - wall0, 3), "build_s": round(build_s, 3),
+                  "simulate_s": round(sim_s, 3), "steps": int(sim.steps), "dt_s": dt,
+                  "simulated_s": round(sum(ctx.phases.values()), 6),
+                  "phases_s": {k: round(v, 6) for k, v in ctx.phases.items()},
+                  "worlds": nw, "spheres": int(model.num_spheres), "bodies": int(model.num_bodies),
+                  "spheres_per_world": int(model.num_spheres // nw), "device": str(model.device),
+                  "note": "timing is for the whole run (all worlds together)"}
+        protocol = {"scale": self.scale, "settings": self.settings(), "deviations_from_paper": self.deviations_from_paper(),
+                    "contact_law": law.describe(), "t_motion_start_s": t_motion,
+                    "fill": {"particles_per_world": int(fills[0].sample.n),
+                             "mass_per_world_kg": round(fills[0].sample.total_mass, 6),
+                             "loose_top_m": round(max(f.top for f in fills), 6),
+                             "above_region": bool(any(f.above_region for f in fills)),
+                             "pours": int(max(f.pours for f in fills))}}
+        results = []
+        for w in range(nw):
+            cp = {n: float(model.get_contact_parameter(n)[w]) for n in model.parameter_names}
+            r = ExperimentResult(self.name, self.scale, w, sets[w], cp, angle_name=self.angle_name,
+                                 diagnostics=ctx.diag[w], timing=timing, protocol=protocol)
+            o = outcome[w] if w < len(outcome) else {}
+            r.fit = o.get("fit")
+            r.particles = o.get("particles")
+            r.bulk_density = o.get("bulk_density")
+            if fatal is not None:
+                r.fail(fatal)
+            elif ctx.errors[w] is not None:
+                r.fail(ctx.errors[w])
+            elif o.get("angle") is None or not math.isfinite(o["angle"]):
+                r.fail("no angle was measured")
+            else:
+                r.angle_deg = float(o["angle"])
+            results.append(r)
+        ctx.log("done: " + ", ".join(f"w{r.world}={r.angle_deg:.2f}" if r.ok else f"w{r.world}=failed" for r in results))
+        return results

@@ -1,0 +1,134 @@
+"""C. Hollow cylinder lifting: validation pile angle gamma_s
+(spec: /work/shared/spec/experiments.md, section C; seed paper Table 10)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+import warpdem as wd
+from warpdem import ConfigError
+from warpdem.geometry import cylinder_shell
+
+from ..filling import VerticalCylinder, body_tops, level
+from ..materials import BulkMaterial
+from ..measurement import CylinderPileResult, cylinder_pile_angle
+from .baffle import QUICK_MATERIAL
+from .common import Experiment, RunContext, fit_to_dict, rectangle
+
+__all__ = ["HollowCylinder"]
+
+
+@dataclass
+class HollowCylinder(Experiment):
+    """Hollow cylinder lifting (spec C), SI units.
+
+    Open cylinder of inner ``diameter`` and ``height`` [m] (``sections`` facets) standing on
+    a square floor plate of side ``plate_size`` [m] centred on the axis x = y = 0. Filled
+    with ``fill_mass`` [kg], settled, levelled at ``level_height`` [m] if given; lifted in +z
+    at ``lift_speed`` [m/s] until its bottom edge is ``lift_clearance`` [m] (None: one
+    largest particle diameter) above the pile top, then run until settled or
+    ``max_time_after_lift`` [s] after the lift ended (the spec gives no limit; this is the
+    config's). Particles off the plate or below ``removal_z`` are removed.
+    Measurement: four half-profiles, ``bin_width`` bins, fit band ``band`` x peak height.
+    Scale "quick": spheres d = 24-30 mm, lift at 0.1 m/s (paper 0.01 m/s), at most 3 s after.
+    """
+
+    name: ClassVar[str] = "cylinder"
+    angle_name: ClassVar[str] = "gamma_s"
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
+        "paper": {},
+        "quick": {"material": QUICK_MATERIAL, "lift_speed": 0.1, "max_time_after_lift": 3.0, "bin_width": 0.020},
+    }
+
+    diameter: float = 0.200
+    height: float = 0.500
+    sections: int = 64
+    plate_size: float = 1.0
+    fill_mass: float = 10.0
+    level_height: float | None = None
+    lift_speed: float = 0.01
+    lift_clearance: float | None = None
+    max_time_after_lift: float = 8.0
+    bin_width: float = 0.010
+    band: tuple[float, float] = (0.20, 0.80)
+    min_bins: int = 3
+    removal_z: float = -0.050
+
+    def validate(self) -> None:
+        self._check_positive("diameter", "height", "plate_size", "fill_mass", "lift_speed", "bin_width")
+        self._check_nonnegative("max_time_after_lift")
+        for name in ("level_height", "lift_clearance"):
+            if getattr(self, name) is not None:
+                self._check_positive(name)
+        if self.plate_size <= self.diameter:
+            raise ConfigError(f"cylinder: plate_size {self.plate_size} m must exceed the diameter {self.diameter} m")
+        if int(self.sections) < 8:
+            raise ConfigError(f"cylinder: sections must be >= 8, got {self.sections}")
+        self._check_range("band", (0.0, 1.0))
+
+    # ------------------------------------------------------------------ set-up (spec C)
+    def fill_region(self) -> VerticalCylinder:
+        return VerticalCylinder((0.0, 0.0), 0.5 * self.diameter, 0.0, self.height, open_top=True)
+
+    def fill_amount(self, material: BulkMaterial) -> dict[str, float]:
+        return {"mass": self.fill_mass}
+
+    def add_walls(self, builder: wd.ModelBuilder, fill_top: float, t_motion: float, material: BulkMaterial) -> None:
+        # the shell reaches above a loose column taller than ``height``
+        h = max(self.height, fill_top + material.max_bounding_radius)
+        shell = cylinder_shell(0.5 * self.diameter, h, axis=(0.0, 0.0, 1.0), center=(0.0, 0.0, 0.5 * h),
+                               sections=int(self.sections), caps=False)
+        lift = wd.WallMotion.translation((0.0, 0.0, self.lift_speed), start=t_motion)
+        wm = self.wall_material.name
+        builder.add_wall(shell, wm, motion=lift, name="cylinder")
+        s = self.plate_size
+        builder.add_wall(rectangle((-s / 2, -s / 2, 0.0), (s, 0, 0), (0, s, 0), 4), wm, name="plate")
+
+    def remove_box(self) -> tuple:
+        s = 0.5 * self.plate_size
+        return (-s, -s, self.removal_z), (s, s, 100.0)
+
+    # ------------------------------------------------------------------ protocol (spec C)
+    def protocol(self, ctx: RunContext, t_motion: float) -> list[dict[str, Any]]:
+        nw = ctx.num_worlds
+        box = self.remove_box()
+        # Fill: settled and levelled as in A (spec C "Fill")
+        t_min, t_max = self.fill_settle_times(ctx.fills)
+        ctx.settle("fill_settle", t_max, t_min, box)
+        if self.level_height is not None:
+            removed = level(ctx.sim, self.level_height)
+            for w in range(nw):
+                ctx.diag[w]["levelled_removed"] = int(removed[w])
+        # lift until the bottom edge clears the pile top (highest active top of all worlds) (spec C "Protocol")
+        active = ctx.sim.state.body_active.numpy() != 0
+        tops = body_tops(ctx.sim)
+        pile_top = float(tops[active].max())
+        material = self.bulk_material()
+        clearance = self.lift_clearance if self.lift_clearance is not None else 2.0 * material.max_bounding_radius
+        lift_time = (pile_top + clearance) / self.lift_speed
+        for w in range(nw):
+            sel = active & (ctx.model.host["body_world"] == w)
+            ctx.diag[w]["fill_top_m"] = float(tops[sel].max())
+        ctx.jump_clock(t_motion)
+        ctx.advance("lift", lift_time, box)
+        # then run until settled (spec C "Protocol")
+        ctx.settle("after_lift_settle", self.max_time_after_lift, 0.0, box)
+        removed = ctx.removed_per_world()
+        x_all = ctx.sim.sphere_positions()
+        out: list[dict[str, Any]] = [dict() for _ in range(nw)]
+        for w in range(nw):
+            ctx.diag[w].update(removed_total=int(removed[w]), lift_speed_m_s=self.lift_speed, lift_time_s=lift_time)
+            xs, rs = ctx.world_spheres(w, x_all)
+            out[w]["particles"] = (xs.astype(np.float32), rs.astype(np.float32))
+            d_mean = float(np.mean(ctx.fill(w).sample.equivalent_diameter))
+            res = ctx.measure(w, "gamma_s", cylinder_pile_angle, xs, rs, d_mean, axis_xy=(0.0, 0.0),
+                              bin_width=self.bin_width, band=self.band, min_bins=int(self.min_bins))
+            if res is None:
+                continue
+            out[w].update(angle=res.gamma_s_deg, fit=res)
+            ctx.diag[w].update(thetas_deg=res.thetas_deg, halves=list(CylinderPileResult.HALVES),
+                               peak_height_m=res.peak_height, mean_diameter_m=d_mean,
+                               fits={h: fit_to_dict(f) for h, f in zip(CylinderPileResult.HALVES, res.fits)})
+        return out

@@ -1,0 +1,468 @@
+"""Loose fills, settling and levelling for the standard experiments
+(spec: /work/shared/spec/experiments.md, A "Fill", B "Fill", C "Fill").
+
+Fill: random sequential addition (RSA) in horizontal slabs rising from the region's
+floor. Each particle (spheres, or clumps with a random orientation) tries batches of random
+centres in the current slab; a try is accepted when every member sphere lies inside the
+region and clears every placed member sphere by ``gap``. When a whole batch fails the slab
+moves up. Regions that are open at the top (box, vertical cylinder) may be exceeded: the
+column then stands above the walls' nominal height and pours down when settled (the walls
+of the experiments are raised to contain it). The result is checked for overlaps with a
+``scipy.spatial.cKDTree``. A closed region (the drum) that one loose pass cannot hold is
+filled by :func:`pour_fill`: place what fits, settle it in a one-world model, add more in
+the freed space, repeat.
+
+Levelling removes particles whose top is above a height. A :class:`warpdem.Model` is
+immutable, so removal is done by **deactivating bodies** in ``sim.state.body_active`` (the
+engine then skips them in contacts, integration and kinetic energy); contact history of the
+remaining particles is kept. Positions of deactivated bodies stay in the arrays: read
+particles through :func:`active_spheres` / :func:`active_bodies`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from warpdem import ConfigError
+from warpdem.builder import random_quaternions
+
+from .materials import ParticleSample
+
+__all__ = ["Box", "VerticalCylinder", "HorizontalCylinder", "FillResult", "FillError", "random_fill", "pour_fill",
+           "check_no_overlap", "add_fill", "member_positions", "SettleReport", "settle", "level",
+           "active_spheres", "active_bodies", "body_tops", "run_for"]
+
+
+class FillError(ConfigError):
+    """The particles do not fit into the fill region."""
+
+
+# --------------------------------------------------------------------------- regions
+@dataclass(frozen=True)
+class Box:
+    """Axis-aligned box [lower, upper] [m]; open at the top when ``open_top`` (the fill may
+    then rise above ``upper[2]``)."""
+
+    lower: tuple[float, float, float]
+    upper: tuple[float, float, float]
+    open_top: bool = True
+
+    def __post_init__(self) -> None:
+        if not all(u > l for l, u in zip(self.lower, self.upper)):
+            raise ConfigError(f"Box: upper {self.upper} must exceed lower {self.lower} in x, y and z")
+
+    def contains(self, x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
+        lo = np.asarray(self.lower) + (r + gap)[:, None]
+        hi = np.asarray(self.upper) - (r + gap)[:, None]
+        ok = np.all(x[:, :2] >= lo[:, :2], axis=1) & np.all(x[:, :2] <= hi[:, :2], axis=1) & (x[:, 2] >= lo[:, 2])
+        return ok if self.open_top else ok & (x[:, 2] <= hi[:, 2])
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(self.lower, float), np.asarray(self.upper, float)
+
+
+@dataclass(frozen=True)
+class VerticalCylinder:
+    """Cylinder with a vertical axis through ``center`` (x, y) [m], radius [m], z in [z0, z1]."""
+
+    center: tuple[float, float]
+    radius: float
+    z0: float
+    z1: float
+    open_top: bool = True
+
+    def __post_init__(self) -> None:
+        if not (self.radius > 0 and self.z1 > self.z0):
+            raise ConfigError(f"VerticalCylinder: need radius > 0 and z1 > z0, got {self.radius}, {self.z0}, {self.z1}")
+
+    def contains(self, x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
+        rho = np.hypot(x[:, 0] - self.center[0], x[:, 1] - self.center[1])
+        ok = (rho <= self.radius - r - gap) & (x[:, 2] >= self.z0 + r + gap)
+        return ok if self.open_top else ok & (x[:, 2] <= self.z1 - r - gap)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        c, R = self.center, self.radius
+        return np.array([c[0] - R, c[1] - R, self.z0]), np.array([c[0] + R, c[1] + R, self.z1])
+
+
+@dataclass(frozen=True)
+class HorizontalCylinder:
+    """Closed cylinder with its axis along y through (x, z) = ``center`` [m] (a drum), y in [y0, y1]."""
+
+    center: tuple[float, float]
+    radius: float
+    y0: float
+    y1: float
+    open_top = False
+
+    def __post_init__(self) -> None:
+        if not (self.radius > 0 and self.y1 > self.y0):
+            raise ConfigError(f"HorizontalCylinder: need radius > 0 and y1 > y0, got {self.radius}, {self.y0}, {self.y1}")
+
+    def contains(self, x: np.ndarray, r: np.ndarray, gap: float) -> np.ndarray:
+        rho = np.hypot(x[:, 0] - self.center[0], x[:, 2] - self.center[1])
+        return (rho <= self.radius - r - gap) & (x[:, 1] >= self.y0 + r + gap) & (x[:, 1] <= self.y1 - r - gap)
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        c, R = self.center, self.radius
+        return np.array([c[0] - R, self.y0, c[1] - R]), np.array([c[0] + R, self.y1, c[1] + R])
+
+
+Region = Box | VerticalCylinder | HorizontalCylinder
+
+
+# --------------------------------------------------------------------------- fill
+@dataclass(frozen=True)
+class FillResult:
+    """Placed particles: body centres ``positions`` (n, 3) [m] and body-to-world quaternions
+    ``rotations`` (n, 4) (x, y, z, w) for ``sample``; the first ``placed`` are placed (the
+    rest, after a partial fill, hold NaN). ``top``: highest particle top [m];
+    ``above_region``: the column rises above the region's nominal top; ``settled``: the
+    positions come from a settled pour (contacts overlap slightly, see :func:`pour_fill`)."""
+
+    sample: ParticleSample
+    positions: np.ndarray
+    rotations: np.ndarray
+    top: float
+    above_region: bool
+    region: object
+    placed: int = -1
+    settled: bool = False
+    pours: int = 0
+
+    def __post_init__(self) -> None:
+        if self.placed < 0:
+            object.__setattr__(self, "placed", int(self.sample.n))
+
+    @property
+    def complete(self) -> bool:
+        return self.placed == self.sample.n
+
+    @property
+    def loose_solids_fraction(self) -> float:
+        """Solid volume / region volume up to ``top`` (a rough measure of looseness)."""
+        lo, hi = self.region.bounds
+        if isinstance(self.region, HorizontalCylinder):
+            return float("nan")
+        area = (hi[0] - lo[0]) * (hi[1] - lo[1]) if isinstance(self.region, Box) else math.pi * self.region.radius**2
+        return self.sample.solid_volume / (area * (self.top - lo[2]))
+
+
+def member_positions(fill: FillResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Member spheres of the placed particles: centres (m, 3) [m], radii (m,), owner (m,)."""
+    xs, rs, owner = [], [], []
+    rot = Rotation.from_quat(fill.rotations[: fill.placed])
+    for i in range(fill.placed):
+        off, r = fill.sample.members(i)
+        xs.append(fill.positions[i] + rot[i].apply(off))
+        rs.append(r)
+        owner.append(np.full(len(r), i))
+    return np.concatenate(xs), np.concatenate(rs), np.concatenate(owner)
+
+
+def random_fill(region: Region, sample: ParticleSample, rng: np.random.Generator | int | None = None,
+                gap: float | None = None, batch: int = 48, rise: float = 0.25, max_rise_factor: float = 20.0,
+                fixed: tuple[np.ndarray, np.ndarray] | None = None, allow_partial: bool = False) -> FillResult:
+    """Loose non-overlapping placement of ``sample`` in ``region`` (module docstring).
+
+    Args:
+        gap: clearance between member spheres and to the region [m] (default 2 % of the
+            largest bounding radius).
+        batch: random centres tried per particle before the slab rises.
+        rise: slab rise after a failed batch, in largest bounding radii.
+        max_rise_factor: an open-top column may reach this many region heights.
+        fixed: (positions (k, 3), rotations (k, 4)) of the first k particles, already placed
+            (e.g. settled by :func:`pour_fill`); only the others are placed, clear of them.
+        allow_partial: in a closed region, return what fits instead of raising.
+    Raises:
+        FillError: the particles do not fit (closed region full, or the column grows absurdly).
+    """
+    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    n = sample.n
+    rb = sample.bounding_radius
+    rb_max = float(rb.max())
+    gap = 0.02 * rb_max if gap is None else float(gap)
+    lo, hi = region.bounds
+    height = hi[2] - lo[2]
+    is_sphere = sample.template < 0
+    k0 = 0 if fixed is None else int(len(fixed[0]))
+    quats = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
+    free = ~is_sphere & (np.arange(n) >= k0)
+    if np.any(free):
+        quats[free] = random_quaternions(int(np.count_nonzero(free)), rng)
+    pos = np.full((n, 3), np.nan)
+    if k0:
+        pos[:k0] = np.asarray(fixed[0], dtype=float)
+        quats[:k0] = np.asarray(fixed[1], dtype=float)
+    rots = Rotation.from_quat(quats)
+    # member offsets in the world frame (orientation fixed per particle) and radii
+    offs, mrad = [], []
+    for i in range(n):
+        o, r = sample.members(i)
+        offs.append(rots[i].apply(o) if not is_sphere[i] else o)
+        mrad.append(r)
+    placed_members = [(pos[i] + offs[i], mrad[i]) for i in range(k0)]
+    dz = 2.0 * rb_max
+    level = lo[2]
+    z_limit = lo[2] + max_rise_factor * height
+    placed = n
+    for i in range(k0, n):
+        ri = rb[i]
+        o_i, r_i = offs[i], mrad[i]
+        while True:
+            if not region.open_top and level + 2 * ri > hi[2] + 1e-12:
+                if allow_partial:
+                    placed = i
+                    break
+                raise FillError(f"fill: only {i} of {n} particles fit in the closed region "
+                                f"{type(region).__name__} (bounds {lo.round(4).tolist()} - {hi.round(4).tolist()} m) "
+                                f"in one loose pass; use pour_fill (settles and adds more), less material or a "
+                                f"larger region")
+            if level > z_limit:
+                raise FillError(f"fill: the loose column exceeds {max_rise_factor:g} region heights after {i} of {n} "
+                                f"particles; the cross-section is too small for this material")
+            c = np.empty((batch, 3))
+            c[:, 0] = rng.uniform(lo[0] + ri, hi[0] - ri, batch) if hi[0] - lo[0] > 2 * ri else 0.5 * (lo[0] + hi[0])
+            c[:, 1] = rng.uniform(lo[1] + ri, hi[1] - ri, batch) if hi[1] - lo[1] > 2 * ri else 0.5 * (lo[1] + hi[1])
+            c[:, 2] = rng.uniform(level + ri, level + ri + dz, batch)
+            # inside the region (all members)
+            k = len(r_i)
+            mem = (c[:, None, :] + o_i[None, :, :]).reshape(-1, 3)
+            inside = region.contains(mem, np.tile(r_i, batch), gap).reshape(batch, k).all(axis=1)
+            cand = np.nonzero(inside)[0]
+            accepted = -1
+            if cand.size:
+                # bounding-sphere conflicts with placed particles near the slab
+                near = np.nonzero(pos[:i, 2] > level - 2.0 * rb_max - gap)[0]
+                if near.size == 0:
+                    accepted = int(cand[0])
+                else:
+                    d = np.linalg.norm(c[cand, None, :] - pos[None, near, :], axis=2)
+                    conflict = d < (ri + rb[near] + gap)[None, :]
+                    for a in range(cand.size):
+                        js = near[conflict[a]]
+                        if js.size == 0:
+                            accepted = int(cand[a])
+                            break
+                        if is_sphere[i] and np.all(is_sphere[js]):
+                            continue  # bounding spheres are the spheres: a real conflict
+                        xm = c[cand[a]] + o_i
+                        other = np.concatenate([placed_members[j][0] for j in js])
+                        orad = np.concatenate([placed_members[j][1] for j in js])
+                        dm = np.linalg.norm(xm[:, None, :] - other[None, :, :], axis=2)
+                        if np.all(dm >= r_i[:, None] + orad[None, :] + gap):
+                            accepted = int(cand[a])
+                            break
+            if accepted >= 0:
+                pos[i] = c[accepted]
+                placed_members.append((c[accepted] + o_i, r_i))
+                break
+            level += rise * rb_max
+        if placed < n:
+            break
+    tops = np.array([np.max(m[0][:, 2] + m[1]) for m in placed_members]) if placed_members else np.array([lo[2]])
+    top = float(tops.max())
+    res = FillResult(sample, pos, quats, top, bool(top > hi[2] + 1e-12), region, placed=placed,
+                     settled=fixed is not None)
+    if fixed is None:
+        check_no_overlap(res)
+    return res
+
+
+def check_no_overlap(fill: FillResult, tol: float = 0.0) -> float:
+    """Largest overlap between member spheres of different placed particles [m]; raises
+    FillError above ``tol``."""
+    x, r, owner = member_positions(fill)
+    tree = cKDTree(x)
+    pairs = tree.query_pairs(2.0 * float(r.max()), output_type="ndarray")
+    if len(pairs) == 0:
+        return 0.0
+    a, b = pairs[:, 0], pairs[:, 1]
+    keep = owner[a] != owner[b]
+    a, b = a[keep], b[keep]
+    ov = r[a] + r[b] - np.linalg.norm(x[a] - x[b], axis=1) if len(a) else np.zeros(0)
+    worst = float(ov.max()) if ov.size else 0.0
+    if worst > tol:
+        raise FillError(f"fill: particles {owner[a[np.argmax(ov)]]} and {owner[b[np.argmax(ov)]]} overlap by "
+                        f"{worst:.3g} m")
+    return max(worst, 0.0)
+
+
+def pour_fill(region: Region, sample: ParticleSample, add_walls: Callable, rng: np.random.Generator | int | None = None,
+              device: str | None = None, ke_per_particle: float = 1.0e-6, max_time: float = 1.5,
+              max_pours: int = 30, rolling: str = "epsd") -> FillResult:
+    """Fill a region that one loose pass cannot hold (a closed drum): place what fits
+    (:func:`random_fill`), let it settle in a one-world model whose walls ``add_walls(builder)``
+    adds (default contact parameters of the law, particle material = the sample's), then
+    place more in the freed space above the bed, and repeat until every particle is in.
+
+    The result holds settled positions (``settled=True``): neighbours overlap by their
+    weight's Hertz overlap, so models built from it need a lenient overlap check.
+    """
+    import warpdem as wd
+
+    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    fill = random_fill(region, sample, rng, allow_partial=True)
+    pours = 0
+    while not fill.complete:
+        pours += 1
+        k = fill.placed
+        if pours > max_pours or k == 0:
+            raise FillError(f"pour_fill: {k} of {sample.n} particles placed after {pours - 1} pour(s); "
+                            f"the region cannot hold this material")
+        b = wd.ModelBuilder(1, contact_law=wd.ContactLaw(rolling=rolling))
+        mat = sample.material.particle
+        b.add_material(mat)
+        add_walls(b)
+        part = FillResult(_subset(sample, k), fill.positions[:k], fill.rotations[:k], fill.top, False, region,
+                          settled=fill.settled)
+        ids = add_fill(b, part, mat.name, 0)
+        model = b.finalize(device, overlap_tolerance=1.0)
+        sim = wd.Simulation(model, wd.time_step_limits(model).recommended)
+        t_fall = math.sqrt(2.0 * max(fill.top - region.bounds[0][2], 0.0) / 9.81)
+        settle(sim, ke_per_particle, max(max_time, t_fall), min_time=t_fall)
+        q = sim.state.body_q.numpy().astype(float)[ids]
+        rot = sim.state.body_rot.numpy().astype(float)[ids]
+        fill = random_fill(region, sample, rng, fixed=(q, rot), allow_partial=True)
+        if fill.placed == k:
+            raise FillError(f"pour_fill: no room for more particles after settling ({k} of {sample.n} placed); "
+                            f"the region cannot hold this material")
+    x, r, _ = member_positions(fill)
+    return FillResult(sample, fill.positions, fill.rotations, float(np.max(x[:, 2] + r)), fill.above_region, region,
+                      settled=pours > 0, pours=pours)
+
+
+def _subset(sample: ParticleSample, k: int) -> ParticleSample:
+    return ParticleSample(sample.material, sample.template[:k], sample.radius[:k], sample.bounding_radius[:k],
+                          sample.mass[:k], sample.equivalent_diameter[:k])
+
+
+def add_fill(builder, fill: FillResult, material, world: int) -> np.ndarray:
+    """Add a fill's particles to a :class:`warpdem.ModelBuilder` in ``world``; returns body ids
+    in the order of ``fill.sample``."""
+    if not fill.complete:
+        raise FillError(f"add_fill: only {fill.placed} of {fill.sample.n} particles are placed")
+    s = fill.sample
+    ids = np.empty(s.n, dtype=np.int64)
+    sph = np.nonzero(s.template < 0)[0]
+    if sph.size:
+        ids[sph] = builder.add_spheres(fill.positions[sph], s.radius[sph], material, world=world)
+    for k in np.unique(s.template[s.template >= 0]):
+        sel = np.nonzero(s.template == k)[0]
+        ids[sel] = builder.add_clumps(s.material.clumps[int(k)][0], fill.positions[sel], material, world=world,
+                                      rotations=fill.rotations[sel])
+    return ids
+
+
+# --------------------------------------------------------------------------- state access
+def active_spheres(sim, world: int | None = None, positions: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (m, 3) [m] and radii (m,) of the spheres of active bodies (one world, or all).
+    ``positions``: a previous ``sim.sphere_positions()`` read-back to reuse."""
+    h = sim.model.host
+    x = sim.sphere_positions() if positions is None else positions
+    act = sim.state.body_active.numpy()[h["sphere_body"]] != 0
+    if world is not None:
+        act &= h["sphere_world"] == world
+    return x[act], h["sphere_radius"][act].astype(np.float64)
+
+
+def active_bodies(sim, world: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of mass (m, 3) [m] and masses (m,) [kg] of active bodies (one world, or all)."""
+    h = sim.model.host
+    act = sim.state.body_active.numpy() != 0
+    if world is not None:
+        act &= h["body_world"] == world
+    return sim.state.body_q.numpy()[act].astype(np.float64), h["body_mass"][act].astype(np.float64)
+
+
+def body_tops(sim, positions: np.ndarray | None = None) -> np.ndarray:
+    """Highest member-sphere top z + r of every body [m] (inactive bodies included)."""
+    h = sim.model.host
+    x = sim.sphere_positions() if positions is None else positions
+    tops = np.full(sim.model.num_bodies, -np.inf)
+    np.maximum.at(tops, h["sphere_body"], x[:, 2] + h["sphere_radius"])
+    return tops
+
+
+def level(sim, height: float, world: int | None = None) -> np.ndarray:
+    """Levelling (spec A "Fill"): deactivate bodies whose top is above ``height`` [m] (one
+    world or all); returns the number removed per world."""
+    h = sim.model.host
+    tops = body_tops(sim)
+    active = sim.state.body_active.numpy().copy()
+    remove = (active != 0) & (tops > height)
+    if world is not None:
+        remove &= h["body_world"] == world
+    active[remove] = 0
+    sim.state.body_active.assign(active)
+    return np.bincount(h["body_world"][remove], minlength=sim.model.num_worlds)
+
+
+# --------------------------------------------------------------------------- settling
+@dataclass(frozen=True)
+class SettleReport:
+    """Outcome of :func:`settle`: simulated time spent [s], whether every world met the
+    criterion, final kinetic energy per active particle per world [J], bodies removed."""
+
+    time: float
+    settled: bool
+    ke_per_particle: np.ndarray
+    removed: int
+
+
+def settle(sim, ke_per_particle: float = 1.0e-6, max_time: float = 1.5, min_time: float = 0.0,
+           check_interval: float = 0.02, remove_box: tuple | None = None) -> SettleReport:
+    """Run until the mean kinetic energy per active particle of every world is below
+    ``ke_per_particle`` [J] (spec A/C "settled" criterion) after ``min_time``, or ``max_time``
+    [s] passed. Bodies leaving ``remove_box`` = (lower, upper) [m] are removed at each check."""
+    if max_time < 0 or min_time < 0:
+        raise ConfigError(f"settle: times must be >= 0, got min {min_time}, max {max_time}")
+    dt = sim.dt
+    chunk = max(1, int(round(check_interval / dt)))
+    n_total = int(round(max_time / dt))
+    done, removed = 0, 0
+    worlds = sim.model.host["body_world"]
+    ke = np.zeros(sim.model.num_worlds)
+    settled = False
+    while done < n_total:
+        k = min(chunk, n_total - done)
+        sim.run(k, check_every=k)
+        done += k
+        if remove_box is not None:
+            removed += sim.remove_outside(*remove_box)
+        active = np.bincount(worlds, weights=sim.state.body_active.numpy(), minlength=sim.model.num_worlds)
+        ke = sim.kinetic_energy() / np.maximum(active, 1)
+        if done * dt >= min_time - 1e-12 and np.all(ke < ke_per_particle):
+            settled = True
+            break
+    return SettleReport(done * dt, settled, ke, removed)
+
+
+def run_for(sim, duration: float, remove_box: tuple | None = None, remove_interval: float = 0.05) -> tuple[int, int]:
+    """Advance ``duration`` [s], removing bodies outside ``remove_box`` every
+    ``remove_interval`` [s]; returns (steps, bodies removed)."""
+    steps = int(round(duration / sim.dt))
+    if steps <= 0:
+        return 0, 0
+    if remove_box is None:
+        sim.run(steps)
+        return steps, 0
+    every = max(1, int(round(remove_interval / sim.dt)))
+    done, removed = 0, 0
+    while done < steps:
+        k = min(every, steps - done)
+        sim.run(k, check_every=k)
+        removed += sim.remove_outside(*remove_box)
+        done += k
+    return steps, removed
+
+

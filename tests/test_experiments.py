@@ -1,0 +1,244 @@
+"""Standard experiments (spec: /work/shared/spec/experiments.md): materials, fills, levelling,
+configs and quick-scale runs of A (baffle), B (drum) and C (hollow cylinder).
+
+The quick runs take 20-40 s each on 2 CPU cores."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+import warpdem as wd
+from calibration.experiments import BaffleBox, HollowCylinder, RotatingDrum, make_experiment
+from calibration.experiments.cli import check_config, experiment_main
+from calibration.experiments.common import normalize_parameter_sets
+from calibration.filling import (Box, FillError, HorizontalCylinder, VerticalCylinder, check_no_overlap, level,
+                                 member_positions, random_fill)
+from calibration.materials import BulkMaterial, sample_particles
+
+LOW = dict(mu_s_pp=0.3, mu_s_pw=0.3, mu_r_pp=0.05, mu_r_pw=0.05)
+HIGH = dict(mu_s_pp=0.6, mu_s_pw=0.6, mu_r_pp=0.15, mu_r_pw=0.15)
+
+
+def dumbbell_material(size_scale=1.0):
+    cg = pytest.importorskip("warpdem.clump_geometry")
+    t1 = cg.make_template([[-0.006, 0, 0], [0.006, 0, 0]], [0.008, 0.008], 2661.0, name="dumbbell")
+    t2 = cg.make_template([[0, 0, 0]], [0.009], 2661.0, name="ball")
+    return BulkMaterial.clump_mix([(t1, 0.75), (t2, 0.25)], size_scale=size_scale)
+
+
+# --------------------------------------------------------------------------- materials
+def test_sample_spheres_by_mass_and_count():
+    m = BulkMaterial.spheres(0.016, 0.020)
+    s = sample_particles(m, mass=2.0, rng=1)
+    assert abs(s.total_mass - 2.0) <= s.mass.max()
+    d = 2 * s.radius
+    assert d.min() >= 0.016 and d.max() <= 0.020 and d.std() > 0.0005  # uniform, not fixed
+    assert sample_particles(BulkMaterial.spheres(0.018), n=7, rng=0).radius.tolist() == [0.009] * 7
+
+
+def test_sample_clump_mix_follows_number_fractions():
+    mat = dumbbell_material()
+    s = sample_particles(mat, n=40, rng=0)
+    assert np.count_nonzero(s.template == 0) == 30 and np.count_nonzero(s.template == 1) == 10
+    s = sample_particles(mat, mass=1.0, rng=0)
+    assert abs(s.total_mass - 1.0) < max(t.mass for t, _ in mat.clumps)
+
+
+def test_material_validation():
+    with pytest.raises(wd.ConfigError, match="exactly one"):
+        BulkMaterial()
+    with pytest.raises(wd.ConfigError, match="millimetres"):
+        BulkMaterial.spheres(16, 20)
+    with pytest.raises(wd.ConfigError, match="d_min <= d_max"):
+        BulkMaterial.spheres(0.02, 0.01)
+    with pytest.raises(wd.ConfigError, match="unknown key"):
+        BulkMaterial.from_config({"type": "spheres", "diameter": 0.02, "colour": "grey"})
+    with pytest.raises(wd.ConfigError, match="exactly one of n"):
+        sample_particles(BulkMaterial.spheres(0.02), rng=0)
+    m = BulkMaterial.from_config({"type": "spheres", "diameter": [0.016, 0.02], "density": 2500})
+    assert m.particle.density == 2500 and m.diameter == (0.016, 0.02)
+
+
+# --------------------------------------------------------------------------- fill
+@pytest.mark.parametrize("region", [Box((0, 0, 0), (0.15, 0.1, 0.1)), VerticalCylinder((0, 0), 0.07, 0, 0.1),
+                                    HorizontalCylinder((0, 0), 0.1, 0, 0.08)])
+def test_fill_has_no_overlaps_and_stays_inside(region):
+    s = sample_particles(BulkMaterial.spheres(0.016, 0.020), mass=1.5, rng=3)
+    f = random_fill(region, s, rng=3)
+    x, r, _ = member_positions(f)
+    # independent overlap check: all pairs
+    d = np.linalg.norm(x[:, None] - x[None], axis=2) - (r[:, None] + r[None])
+    np.fill_diagonal(d, 1.0)
+    assert d.min() > 0
+    assert np.all(region.contains(x, r, 0.0))
+    assert check_no_overlap(f) == 0.0
+
+
+def test_fill_rises_above_open_region_and_refuses_closed_one():
+    s = sample_particles(BulkMaterial.spheres(0.02), n=60, rng=0)
+    f = random_fill(Box((0, 0, 0), (0.1, 0.1, 0.05)), s, rng=0)
+    assert f.above_region and f.top > 0.05
+    with pytest.raises(FillError, match="fit"):
+        random_fill(Box((0, 0, 0), (0.1, 0.1, 0.05), open_top=False), s, rng=0)
+
+
+def test_pour_fill_fills_a_closed_drum_beyond_one_loose_pass():
+    from calibration.experiments.drum import drum_mesh
+    from calibration.filling import pour_fill
+
+    R, L = 0.08, 0.06
+    region = HorizontalCylinder((0, 0), R, 0, L)
+    s = sample_particles(BulkMaterial.spheres(0.016, 0.020), mass=0.45 * math.pi * R * R * L * 0.6 * 2661, rng=0)
+    assert not random_fill(region, s, 0, allow_partial=True).complete  # one loose pass is not enough
+    f = pour_fill(region, s, lambda b: b.add_wall(drum_mesh(R, L, 48), wd.PLEXIGLAS), rng=0, device="cpu")
+    assert f.complete and f.settled and f.pours >= 1
+    x, r, _ = member_positions(f)
+    assert np.all(np.hypot(x[:, 0], x[:, 2]) + r < R + 0.05 * r)
+    assert check_no_overlap(f, tol=0.1 * r.min()) < 0.1 * r.min()  # only small settled contact overlaps
+
+
+def test_clump_fill_no_member_overlaps():
+    mat = dumbbell_material()
+    s = sample_particles(mat, n=80, rng=2)
+    f = random_fill(Box((0, 0, 0), (0.12, 0.12, 0.1)), s, rng=2)
+    assert check_no_overlap(f) == 0.0
+    x, r, owner = member_positions(f)
+    assert len(x) == 2 * 60 + 20
+    # the model builder's own overlap check agrees
+    b = wd.ModelBuilder()
+    b.add_material(wd.GRAVEL)
+    from calibration.filling import add_fill
+
+    add_fill(b, f, "gravel", 0)
+    m = b.finalize("cpu", overlap_tolerance=0.0)
+    assert m.num_bodies == 80 and m.num_spheres == 140
+
+
+def test_level_deactivates_bodies_above_height():
+    b = wd.ModelBuilder(num_worlds=2)
+    b.add_material(wd.GRAVEL)
+    z = np.array([0.01, 0.031, 0.052])
+    pos = np.stack([np.zeros(3), np.zeros(3), z], 1)
+    for w in range(2):
+        b.add_spheres(pos, 0.01, "gravel", world=w)
+    sim = wd.Simulation(b.finalize("cpu"), 1e-5)
+    removed = level(sim, 0.045)  # tops at 0.02, 0.041, 0.062
+    assert removed.tolist() == [1, 1]
+    assert sim.state.body_active.numpy().tolist() == [1, 1, 0, 1, 1, 0]
+
+
+# --------------------------------------------------------------------------- configs
+def test_unknown_settings_and_parameters_raise_clear_errors():
+    with pytest.raises(wd.ConfigError, match=r"unknown setting\(s\) \['baffle_hieght'\]"):
+        make_experiment("baffle", "quick", baffle_hieght=0.5)
+    with pytest.raises(wd.ConfigError, match="unknown scale"):
+        make_experiment("drum", "huge")
+    with pytest.raises(wd.ConfigError, match="unknown experiment"):
+        make_experiment("chute")
+    with pytest.raises(wd.ConfigError, match=r"unknown key\(s\) \['worlds'\]"):
+        check_config({"experiment": "baffle", "parameters": [{}], "worlds": 3})
+    names = wd.ContactLaw(rolling="epsd").parameter_names
+    with pytest.raises(wd.ConfigError, match="unknown contact parameter 'mu_pp'"):
+        normalize_parameter_sets([{"mu_pp": 0.3}], names)
+    with pytest.raises(wd.ConfigError, match="differ in length"):
+        normalize_parameter_sets({"mu_s_pp": [0.1, 0.2], "mu_r_pp": [0.1]}, names)
+    assert normalize_parameter_sets({"mu_s_pp": [0.1, 0.2]}, names) == [{"mu_s_pp": 0.1}, {"mu_s_pp": 0.2}]
+    with pytest.raises(wd.ConfigError, match="lift_speed"):
+        BaffleBox(lift_speed=-0.1)
+    with pytest.raises(wd.ConfigError, match="crop_side"):
+        RotatingDrum(crop_side=0.5)
+
+
+def test_cli_rejects_unknown_key(tmp_path, capsys):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("experiment: baffle\nscale: quick\nparameters: [{}]\nsettings: {lift_sped: 0.2}\n")
+    assert experiment_main([str(cfg), "--output", str(tmp_path / "out")]) == 2
+    assert "lift_sped" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- tiny runs
+TINY_CYL = dict(fill_mass=0.4, lift_speed=0.5, max_time_after_lift=0.2)
+
+
+def test_failed_measurement_is_recorded_not_dropped():
+    exp = HollowCylinder.from_config("quick", min_bins=10_000, **TINY_CYL)
+    res = exp.run([LOW, HIGH], device="cpu")
+    assert [r.world for r in res] == [0, 1]
+    for r in res:
+        assert r.status == "failed" and r.angle_deg is None
+        assert "10000" in r.error and "gamma_s" in r.error
+        assert r.to_dict()["status"] == "failed"
+
+
+def test_cli_writes_results_and_pictures(tmp_path):
+    cfg = {"experiment": "cylinder", "scale": "quick", "device": "cpu", "settings": TINY_CYL,
+           "parameters": {"mu_s_pp": [0.5], "mu_r_pp": [0.1]}}
+    path = tmp_path / "tiny.json"
+    path.write_text(json.dumps(cfg))
+    code = experiment_main([str(path), "--output", str(tmp_path / "out")])
+    assert code in (0, 1)  # a 15-sphere pile may be too small to measure; the run must still report
+    doc = json.loads((tmp_path / "out" / "results.json").read_text())
+    r = doc["results"][0]
+    assert r["scale"] == "quick" and r["protocol"]["deviations_from_paper"]["lift_speed"]["paper"] == 0.01
+    assert r["timing"]["steps"] > 0 and r["contact_parameters"]["mu_s_pp"] == pytest.approx(0.5)
+    assert (tmp_path / "out" / "world_000.png").stat().st_size > 1000
+
+
+def test_clump_material_runs_through_an_experiment():
+    mat = dumbbell_material(size_scale=1.5)
+    exp = HollowCylinder.from_config("quick", material=mat, fill_mass=0.5, lift_speed=0.5, max_time_after_lift=0.2)
+    (r,) = exp.run([HIGH], device="cpu")
+    assert r.timing["spheres"] > r.timing["bodies"] > 0  # clumps, not spheres
+    assert r.status == "ok" or "gamma_s" in r.error
+    assert r.protocol["settings"]["material"]["type"] == "clumps"
+
+
+# --------------------------------------------------------------------------- quick experiments
+def test_quick_baffle_higher_friction_steeper():
+    exp = make_experiment("baffle", "quick")
+    res = exp.run([LOW, HIGH], device="cpu")
+    assert [r.status for r in res] == ["ok", "ok"], [r.error for r in res]
+    a_low, a_high = (r.angle_deg for r in res)
+    assert math.isfinite(a_low) and math.isfinite(a_high)
+    assert a_high > a_low + 3.0, (a_low, a_high)
+    for r in res:
+        assert r.angle_name == "alpha_AoR_S" and r.diagnostics["fit"]["n_bins"] >= 3
+        assert 900 < r.bulk_density < 2661  # loose, below the solid density
+        assert 0.05 < r.diagnostics["h_fill_m"] < 0.4
+        assert r.timing["steps"] > 0 and r.timing["phases_s"]["lift"] == pytest.approx(0.30 / 0.2, rel=0.01)
+        json.dumps(r.to_dict())
+    assert res[0].protocol["deviations_from_paper"]["lift_speed"] == {"value": 0.2, "paper": 0.1}
+
+
+def test_quick_drum_dynamic_angle_with_spread():
+    exp = make_experiment("drum", "quick")
+    (r,) = exp.run([HIGH], device="cpu")
+    assert r.ok, r.error
+    d = r.diagnostics
+    assert d["snapshots"] == 3 * 2 and len(d["snapshot_angles_deg"]) == 6
+    assert 10.0 < r.angle_deg < 70.0
+    assert math.isfinite(d["snapshot_std_deg"]) and d["snapshot_std_deg"] > 0
+    # beta is atan of the mean slope, close to the mean of the snapshot angles
+    assert abs(r.angle_deg - d["snapshot_mean_deg"]) < 3 * d["snapshot_std_deg"] + 1.0
+    assert r.timing["phases_s"]["rotation"] == pytest.approx(3 * 60 / 30.0, rel=0.01)
+
+
+def test_quick_cylinder_four_thetas():
+    exp = make_experiment("cylinder", "quick")
+    (r,) = exp.run([HIGH], device="cpu")
+    assert r.ok, r.error
+    th = np.array(r.diagnostics["thetas_deg"])
+    assert th.shape == (4,) and np.all(np.isfinite(th)) and np.all(th > 0)
+    assert r.angle_deg == pytest.approx(th.mean())
+    assert r.diagnostics["peak_height_m"] > 0.03
+
+
+@pytest.mark.slow
+def test_quick_baffle_spread_of_friction_is_monotonic():
+    """Four worlds from frictionless-ish to rough (~75 s on 2 cores)."""
+    vals = [(0.2, 0.0), (0.35, 0.05), (0.5, 0.1), (0.7, 0.2)]
+    res = make_experiment("baffle", "quick").run(
+        [dict(mu_s_pp=a, mu_s_pw=a, mu_r_pp=b, mu_r_pw=b) for a, b in vals], device="cpu")
+    angles = [r.angle_deg if r.ok else 0.0 for r in res]
+    assert all(b > a for a, b in zip(angles, angles[1:])), angles
