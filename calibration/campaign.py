@@ -39,7 +39,7 @@ from .measurement.records import load_measurements
 
 TOP_KEYS = {"name", "device", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
             "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity"}
-RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target"}
+RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target", "replicates"}
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -52,6 +52,7 @@ class Response:
     scale: str = "quick"
     settings: dict[str, Any] = field(default_factory=dict)
     target: Any = None  # float [deg], {file, experiment, condition}, or {dem_at: {parameters}}
+    replicates: int = 1  # DEM runs per sample with different loose fills (extra worlds), averaged
     target_deg: float | None = None
     target_std_deg: float | None = None
     target_source: str = ""
@@ -88,8 +89,11 @@ def _response(d: Any, where: str) -> Response:
     for k in ("name", "experiment"):
         if k not in d:
             raise ConfigError(f"{where}: missing '{k}'")
+    rep = int(d.get("replicates", 1))
+    if rep < 1:
+        raise ConfigError(f"{where}: replicates must be >= 1, got {rep}")
     return Response(name=str(d["name"]), experiment=str(d["experiment"]), scale=str(d.get("scale", "quick")),
-                    settings=dict(d.get("settings") or {}), target=d.get("target"))
+                    settings=dict(d.get("settings") or {}), target=d.get("target"), replicates=rep)
 
 
 def load_config(path: str | os.PathLike) -> CampaignConfig:
@@ -155,20 +159,34 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
 # ----------------------------------------------------------------------------- DEM runs
 def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: CampaignConfig,
                  progress: bool = False) -> list[dict[str, Any]]:
-    """Run one experiment with one world per parameter set; returns one record per world."""
-    exp = make_experiment(resp.experiment, resp.scale, rolling=cfg.rolling, **resp.settings)
-    sets = [{**cfg.fixed, **p} for p in parameter_sets]
+    """Run one experiment with one world per (parameter set, replicate); returns one record per
+    parameter set with the replicate mean (``angle_deg``), the replicate angles and their spread.
+
+    Replicates use a different loose fill in every world (``fill_per_world``): at small particle
+    counts the angle is a rough function of the parameters, and the replicate spread is the
+    noise floor any calibration against this experiment can reach."""
+    r = resp.replicates
+    settings = dict(resp.settings)
+    if r > 1:
+        settings["fill_per_world"] = True
+    exp = make_experiment(resp.experiment, resp.scale, rolling=cfg.rolling, **settings)
+    sets = [{**cfg.fixed, **p} for p in parameter_sets for _ in range(r)]
     t0 = time.perf_counter()
     try:
         results = exp.run(sets, device=cfg.device, progress=progress)
     except (wd.StabilityError, wd.ContactOverflowError) as exc:  # the whole batch failed
-        return [dict(status="failed", error=f"{type(exc).__name__}: {exc}", angle_deg=None) for _ in sets]
+        return [dict(status="failed", error=f"{type(exc).__name__}: {exc}", angle_deg=None) for _ in parameter_sets]
     wall = time.perf_counter() - t0
     out = []
-    for r in results:
-        out.append(dict(status=r.status, error=r.error, angle_deg=r.angle_deg, wall_s=round(wall, 2),
-                        worlds=len(sets), diagnostics={k: v for k, v in r.diagnostics.items()
-                                                       if k in ("n_bins", "std_deg", "residual_rms_m", "thetas_deg")}))
+    for k in range(len(parameter_sets)):
+        group = results[k * r:(k + 1) * r]
+        angles = [g.angle_deg for g in group if g.ok and g.angle_deg is not None]
+        errors = [g.error for g in group if not g.ok]
+        rec = dict(status="ok" if angles else "failed", error="; ".join(e for e in errors if e) or None,
+                   angle_deg=float(np.mean(angles)) if angles else None, replicate_angles_deg=angles,
+                   replicate_std_deg=float(np.std(angles, ddof=1)) if len(angles) > 1 else None,
+                   wall_s=round(wall, 2), worlds=len(sets))
+        out.append(rec)
     return out
 
 
