@@ -35,6 +35,7 @@ from warpdem import ConfigError
 
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
+from .experiments.common import _jsonable
 from .measurement.records import load_measurements
 
 TOP_KEYS = {"name", "device", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
@@ -386,24 +387,6 @@ class Campaign:
         (self.out / "summary.md").write_text(summary_markdown(res))
         self.log(f"done in {res['wall_s']} s: {self.out / 'summary.md'}")
         return res
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, Mapping):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(float(x)) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    if hasattr(x, "__dict__") and not isinstance(x, type):
-        return _jsonable(vars(x))
-    return x
 
 
 def summary_markdown(res: Mapping[str, Any]) -> str:
