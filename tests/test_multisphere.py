@@ -7,7 +7,9 @@ import trimesh
 
 from warpdem.clump_geometry import union_mass_properties
 from warpdem.errors import ConfigError
-from warpdem.multisphere import clump_from_file, fill_mesh, relative_volume_error, sphericity
+from warpdem.multisphere import (DEFAULT_MIN_RADIUS_FRACTION, clump_from_file, fill_mesh, rayleigh_time_step,
+                                  relative_volume_error, sphericity)
+from warpdem.timestep import rayleigh_time
 
 FAST = dict(n_points=12_000, n_seeds=800, max_iter=30)
 
@@ -119,3 +121,77 @@ def test_clump_from_file_mm_scan(tmp_path):
         clump_from_file(tmp_path / "missing.stl", 4)
     with pytest.raises(ConfigError, match="scale"):
         clump_from_file(path, 4, scale=0.0)
+
+
+def _r_eq(mesh):
+    return (3 * mesh.volume / (4 * math.pi)) ** (1 / 3)
+
+
+def test_rayleigh_time_step():
+    # EDEM / Li et al. 2005: T_R = pi R sqrt(rho/G) / (0.1631 nu + 0.8766), G = E / (2 (1 + nu))
+    g = 1e7 / 2.6
+    assert rayleigh_time_step(0.002, 2661.0, 1e7, 0.3) == pytest.approx(rayleigh_time(0.002, 2661.0, g, 0.3))
+    assert rayleigh_time_step(0.002) == pytest.approx(math.pi * 0.002 * math.sqrt(2661 / g) / (0.1631 * 0.3 + 0.8766))
+    # the paper's dt 4.2e-5 s is ~0.2 T_R of a 2 mm sphere; a 0.27 mm member needs ~7x less
+    assert 0.15 < 4.2e-5 / rayleigh_time_step(0.002) < 0.3
+    assert rayleigh_time_step(0.00027) == pytest.approx(rayleigh_time_step(0.002) * 0.135)
+    with pytest.raises(ConfigError):
+        rayleigh_time_step(0.0)
+
+
+def test_thin_disc_respects_radius_bound():
+    # disc 20 mm across, 2 mm thick: r_eq = 5.31 mm; a bound of 0.4 r_eq = 2.12 mm is twice the
+    # half-thickness, so no inscribed ball qualifies and every member protrudes
+    mesh = trimesh.creation.cylinder(radius=0.010, height=0.002, sections=48)
+    bound = 0.4 * _r_eq(mesh)
+    assert bound > 2 * 0.001
+    _, free = fill_mesh(mesh, 24, min_radius_fraction=0.0, **FAST)
+    assert free.radius_bound == 0.0 and free.min_radius < bound     # unbounded: ~1.1 mm here
+    tpl, rep = fill_mesh(mesh, 24, density=2661.0, min_radius_fraction=0.4, **FAST)
+    assert tpl.n_spheres == rep.n_spheres == 24                  # count honoured
+    assert rep.radius_bound == pytest.approx(bound)
+    assert tpl.radii.min() >= bound
+    assert rep.min_radius == tpl.radii.min() and rep.max_radius == tpl.radii.max()
+    assert rep.volume_error < 2e-3 and not any("volume not matched" in t for t in rep.notes)
+    assert rep.rayleigh_time_step() == pytest.approx(rayleigh_time_step(tpl.radii.min()))
+    # absolute bound (metres), optimiser and volume match keep it too
+    tpl_a, rep_a = fill_mesh(mesh, 10, min_radius=1.5e-3, match_volume=False, **FAST)
+    assert rep_a.radius_bound == 1.5e-3 and tpl_a.radii.min() >= 1.5e-3
+    # both given: the larger holds
+    _, rep_b = fill_mesh(mesh, 4, min_radius=1.0e-3, min_radius_fraction=0.3, refine=False, **FAST)
+    assert rep_b.radius_bound == pytest.approx(0.3 * _r_eq(mesh))
+
+
+def test_radius_bound_volume_match():
+    mesh = trimesh.creation.cylinder(radius=0.010, height=0.002, sections=48)
+    # 16 balls of >= 0.45 r_eq = 2.4 mm over a 2 mm thick disc: the optimiser must pull them
+    # together to hold only V_R -- it does, count and bound kept
+    tpl, rep = fill_mesh(mesh, 16, min_radius_fraction=0.45, **FAST)
+    assert tpl.n_spheres == 16 and tpl.radii.min() >= rep.radius_bound
+    assert rep.volume_error < 2e-3
+    # without the optimiser (greedy balls only) 24 such balls hold 1.4 V_R: the count and the
+    # bound are kept and the report says that the volume is not matched
+    tpl, rep = fill_mesh(mesh, 24, min_radius_fraction=0.45, refine=False, **FAST)
+    assert tpl.n_spheres == 24 and tpl.radii.min() >= rep.radius_bound
+    assert rep.volume_error > 0.05
+    assert any(t.startswith("volume not matched") for t in rep.notes)
+
+
+def test_default_radius_bound_and_unbounded_fill():
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    mesh.apply_scale([0.012, 0.007, 0.005])
+    tpl, rep = fill_mesh(mesh, 12, **FAST)
+    assert rep.radius_bound == pytest.approx(DEFAULT_MIN_RADIUS_FRACTION * _r_eq(mesh))
+    assert tpl.radii.min() >= rep.radius_bound
+    _, free = fill_mesh(mesh, 12, min_radius_fraction=0.0, **FAST)
+    assert free.radius_bound == 0.0 and free.min_radius > 0.0
+    assert (rep.n_redundant > 0) == any("inside the others" in t for t in rep.notes)
+
+
+@pytest.mark.parametrize("kw,match", [(dict(min_radius=-1e-3), "min_radius"),
+                                      (dict(min_radius_fraction=-0.1), "min_radius_fraction"),
+                                      (dict(min_radius_fraction=1.2), "volume-equivalent"),
+                                      (dict(min_radius=0.05), "volume-equivalent")])
+def test_bad_radius_bound(kw, match):
+    with pytest.raises(ConfigError, match=match):
+        fill_mesh(trimesh.creation.icosphere(2, radius=0.01), 3, **kw)

@@ -7,6 +7,7 @@ import pytest
 
 from warpdem.clump_geometry import union_mass_properties
 from warpdem.errors import ConfigError
+from warpdem.multisphere import DEFAULT_MIN_RADIUS_FRACTION, rayleigh_time_step
 from warpdem.shapes import (FILL_LEVELS, SHAPE_CLASSES, TABLE3_PERCENT, TABLE4, gravel_fill,
                             gravel_shape_mix, gravel_templates, shape_mesh, sphericity,
                             target_sphericity)
@@ -78,6 +79,22 @@ def test_gravel_templates_low_fill_and_cache():
     assert again["cone"].mass == pytest.approx(tpls["cone"].mass * 1000.0 / 2661.0)
     rep = gravel_fill("cone", "low")[1]
     assert rep.n_spheres == 5 and rep.volume_error < 2e-3
+
+
+def test_gravel_medium_templates_respect_the_radius_bound():
+    # the smallest member sphere sets the DEM time step: every medium-fill member is
+    # >= 0.25 r_eq (1.8-2.9 mm), so T_R >= 1.6e-4 s and the paper's dt 4.2e-5 s is ~0.25 T_R
+    tpls = gravel_templates("medium", density=2661.0)
+    for name, tpl in tpls.items():
+        rep = gravel_fill(name, "medium")[1]
+        r_eq = (3 * TABLE4[name].volume_r / (4 * math.pi)) ** (1 / 3)
+        bound = DEFAULT_MIN_RADIUS_FRACTION * r_eq
+        assert rep.radius_bound == pytest.approx(bound, rel=1e-3)
+        assert tpl.n_spheres == rep.n_spheres == FILL_LEVELS["medium"][name]
+        assert tpl.radii.min() >= bound >= 1.75e-3, name
+        assert rep.min_radius == pytest.approx(tpl.radii.min())
+        assert rep.volume_error < 2e-3
+        assert rep.rayleigh_time_step(2661.0, 1e7, 0.3) >= rayleigh_time_step(1.75e-3) > 4.2e-5 / 0.3
 
 
 def test_bad_names():

@@ -7,8 +7,11 @@ Algorithm (``fill_mesh``)
    crossings with the mesh (one ray per column), so 10^5 points cost ~0.1 s.
 2. Medial-axis seeds: interior sample points with their inscribed radius = distance to the
    surface (k-d tree on a dense surface sample).
-3. Greedy: repeatedly take the seed ball that covers the most not-yet-covered interior
-   volume (on the sample points), until ``n_spheres`` are placed.
+3. Greedy: repeatedly take the seed ball that most reduces the symmetric difference
+   (newly covered interior volume minus newly covered outside volume, on the sample
+   points), until ``n_spheres`` are placed. Seeds whose inscribed radius is below the
+   radius bound r_b (see below) are offered inflated to r_b (they then protrude and pay
+   for the outside volume), so no ball below the bound is ever chosen.
 4. Refinement: centres and radii are optimised together (L-BFGS) to minimise the symmetric
    difference |U Δ M| = |U \\ M| + |M \\ U| between the sphere union U and the mesh solid M,
    estimated on the sample points with a sigmoid indicator of width h then h/2 (h: point
@@ -20,6 +23,25 @@ Algorithm (``fill_mesh``)
    particle's mass. The relative volume error of eq. 13 is then ~0 by construction and the
    shape fidelity is measured by the symmetric difference, which the report always gives.
    With ``match_volume=False`` eq. 13 measures the unconstrained best fit.
+
+Smallest sphere
+---------------
+The DEM time step scales with the smallest member radius (Rayleigh time
+T_R = pi R sqrt(rho/G) / (0.1631 nu + 0.8766), :func:`rayleigh_time_step`), so one tiny
+member makes a whole simulation of such clumps 10-30x more expensive. As in commercial
+fillers, every radius is bounded below: r_i >= r_b in the greedy step (above), in the
+joint optimisation (a bound of the L-BFGS) and in the volume match (radii at the bound
+stay there; the others are scaled). By default r_b = ``DEFAULT_MIN_RADIUS_FRACTION`` (0.25)
+x the mesh's volume-equivalent radius r_eq = (3 V_R / 4 pi)^(1/3), i.e. 1.8-2.9 mm for the
+seed paper's gravel (Table 4); ``min_radius`` [m] sets an absolute bound instead (both:
+the larger). Without a bound the only floor is the optimiser's half sample spacing
+(~0.27 mm for the paper's discoid), which a redundant member can collapse onto. Where the
+bound forces the balls to protrude (parts thinner than 2 r_b) and their union at the bound
+still exceeds V_R, the optimiser is re-run with a lowered volume target and a stronger
+volume weight (its soft volume runs below the exact union volume). The requested sphere
+count is always honoured: members that the optimiser parks inside the others (they add no
+shape) are counted in ``n_redundant`` and named in ``notes``, as is a volume that cannot
+be matched under the bound.
 
 The reported clump volume V_m is that of the union of spheres (``union_mass_properties``,
 error ~1e-4) and V_R is the exact mesh volume, so eq. 13 is not a sampling estimate. The
@@ -41,6 +63,7 @@ from scipy.spatial import cKDTree
 
 from .clump_geometry import ClumpTemplate, make_template, union_mass_properties
 from .errors import ConfigError
+from .timestep import rayleigh_time
 
 try:  # not re-exported by scipy.optimize
     from scipy.optimize._linesearch import LineSearchWarning
@@ -48,7 +71,24 @@ except ImportError:  # pragma: no cover
     LineSearchWarning = RuntimeWarning
 
 __all__ = ["FillReport", "fill_mesh", "clump_from_file", "check_mesh", "relative_volume_error",
-           "sphericity"]
+           "sphericity", "rayleigh_time_step", "DEFAULT_MIN_RADIUS_FRACTION"]
+
+#: Default lower bound on member radii, as a fraction of the volume-equivalent radius.
+DEFAULT_MIN_RADIUS_FRACTION = 0.25
+
+
+def rayleigh_time_step(radius: float, density: float = 2661.0, youngs_modulus: float = 1.0e7,
+                       poisson: float = 0.3) -> float:
+    """Rayleigh time step T_R = pi R sqrt(rho / G) / (0.1631 nu + 0.8766) [s], G = E / (2 (1 + nu)).
+
+    EDEM's "Rayleigh time step" of a sphere of ``radius`` [m]; the DEM step is a fraction of
+    it (warpdem's ``time_step_limits`` recommends 0.2 T_R of the smallest sphere). Defaults:
+    the seed paper's gravel (rho 2661 kg/m^3, E 1e7 Pa, nu 0.3).
+    """
+    if not (radius > 0 and density > 0 and youngs_modulus > 0 and -1.0 < poisson < 0.5):
+        raise ConfigError(f"rayleigh_time_step: need radius, density, youngs_modulus > 0 and -1 < poisson < 0.5; "
+                          f"got {radius}, {density}, {youngs_modulus}, {poisson}")
+    return rayleigh_time(radius, density, youngs_modulus / (2.0 * (1.0 + poisson)), poisson)
 
 
 @dataclass(frozen=True)
@@ -65,8 +105,15 @@ class FillReport:
         outside_fraction: |U \\ M| / V_R, clump volume outside the mesh [-] (sampled).
         missing_fraction: |M \\ U| / V_R, mesh volume not covered [-] (sampled).
         max_protrusion: largest distance a sphere reaches outside the mesh surface [m].
-        radius_scale: factor applied to all radii to match V_m = V_R (1.0 if not matched).
+        radius_scale: factor applied to the radii to match V_m = V_R (1.0 if not matched;
+            radii held at the bound are not scaled below it).
         time_s: wall-clock time of the fill [s].
+        min_radius: smallest member radius [m] (>= radius_bound).
+        max_radius: largest member radius [m].
+        radius_bound: lower bound r_b imposed on the radii [m] (0: none).
+        n_redundant: members lying (almost) entirely inside the others (exclusive volume
+            < 0.5 % of their own): kept to honour ``n_spheres``, but they add no shape.
+        notes: human-readable warnings (redundant members, volume not matchable, ...).
     """
 
     n_spheres: int
@@ -80,11 +127,21 @@ class FillReport:
     max_protrusion: float
     radius_scale: float
     time_s: float
+    min_radius: float = math.nan
+    max_radius: float = math.nan
+    radius_bound: float = 0.0
+    n_redundant: int = 0
+    notes: tuple[str, ...] = ()
 
     @property
     def symmetric_difference(self) -> float:
         """|U Δ M| / V_R [-] (>= volume_error)."""
         return self.outside_fraction + self.missing_fraction
+
+    def rayleigh_time_step(self, density: float = 2661.0, youngs_modulus: float = 1.0e7,
+                           poisson: float = 0.3) -> float:
+        """Rayleigh time step [s] of the smallest member for a material (default: the paper's gravel)."""
+        return rayleigh_time_step(self.min_radius, density, youngs_modulus, poisson)
 
 
 def relative_volume_error(v_model: float, v_real: float) -> float:
@@ -199,24 +256,50 @@ def _sqdist(p: np.ndarray, c: np.ndarray) -> np.ndarray:
     return out
 
 
-def _greedy(cand: np.ndarray, crad: np.ndarray, pin: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Pick ``n`` candidate balls, each covering the most still-uncovered interior points."""
-    cover = _sqdist(pin, cand) <= (crad * crad)[None, :]      # (N_in, n_cand) bool
-    gain = cover.sum(0).astype(np.float64)
+def _greedy(cand: np.ndarray, crad: np.ndarray, pin: np.ndarray, n: int, pout: np.ndarray | None = None,
+            r_bound: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Pick ``n`` candidate balls, each reducing the sampled symmetric difference the most.
+
+    Candidate radii are max(inscribed radius, r_bound). Inscribed balls cover no outside
+    volume; an inflated ball (inscribed radius < r_bound) also counts the not-yet-covered
+    points of ``pout`` (outside points near the surface, sampled at the density of ``pin``)
+    against it, and is only taken when no inscribed ball of radius >= r_bound still covers
+    new interior (thin parts, or every inscribed ball used). Without inflated candidates
+    this is "cover the most uncovered interior".
+    """
+    rad = np.maximum(crad, r_bound)
+    cover = _sqdist(pin, cand) <= (rad * rad)[None, :]        # (N_in, n_cand) bool
     covered = np.zeros(len(pin), dtype=bool)
+    gain = cover.sum(0).astype(np.float64)
+    infl = np.nonzero(crad < r_bound)[0]
+    use_out = len(infl) > 0 and pout is not None and len(pout) > 0
+    if use_out:
+        cover_out = _sqdist(pout, cand[infl]) <= (rad[infl] ** 2)[None, :]    # (N_out, n_infl)
+        covered_out = np.zeros(len(pout), dtype=bool)
+        gain[infl] -= cover_out.sum(0)
+        col = np.full(len(cand), -1)
+        col[infl] = np.arange(len(infl))
     chosen: list[int] = []
+    fit = crad >= r_bound
     for _ in range(n):
-        score = gain + 1e-9 * crad                             # ties: larger ball
+        score = gain + 1e-9 * rad                              # ties: larger ball
         if chosen:
-            score[chosen] = -1.0
+            score[chosen] = -np.inf
+        if len(infl) and np.any(score[fit] > 0.5):             # an inscribed ball still helps
+            score[infl] = -np.inf
         j = int(np.argmax(score))
         chosen.append(j)
         new = cover[:, j] & ~covered
         if new.any():
             gain -= cover[new].sum(0)
             covered |= new
+        if use_out and col[j] >= 0:
+            new_o = cover_out[:, col[j]] & ~covered_out
+            if new_o.any():
+                gain[infl] += cover_out[new_o].sum(0)            # already paid for
+                covered_out |= new_o
     idx = np.array(chosen)
-    return cand[idx].copy(), crad[idx].copy()
+    return cand[idx].copy(), rad[idx].copy()
 
 
 # ----------------------------------------------------------------------------------------
@@ -273,8 +356,10 @@ def _lbfgs(fg, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, maxiter: int, ste
 
     Plain numpy on purpose: scipy's L-BFGS-B calls BLAS in every iteration, and with OpenBLAS
     threads on a busy machine that costs ~10 ms per iteration (100x the objective here).
-    The bounds are rarely active (they only keep radii positive and centres in the box);
-    when a step is clipped, the curvature history is reset.
+    Bounds: variables at a bound whose gradient points out of the box are held fixed for
+    the step (their components of the gradient and of the direction are zeroed), so a
+    radius resting on the lower radius bound does not clip -- and reset -- every step; when
+    a step is clipped nevertheless, the curvature history is reset.
     """
     cache: dict[bytes, tuple[float, np.ndarray]] = {}
 
@@ -291,10 +376,12 @@ def _lbfgs(fg, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, maxiter: int, ste
     S: list[np.ndarray] = []
     Y: list[np.ndarray] = []
     for _ in range(maxiter):
-        gnorm = float(np.linalg.norm(g))
+        held = ((x <= lo) & (g > 0.0)) | ((x >= hi) & (g < 0.0))
+        gf = np.where(held, 0.0, g)
+        gnorm = float(np.linalg.norm(gf))
         if gnorm == 0.0:
             break
-        q, hist = g.copy(), []
+        q, hist = gf.copy(), []
         for s_, y_ in zip(reversed(S), reversed(Y)):
             rho = 1.0 / float(np.dot(y_, s_))
             a = rho * float(np.dot(s_, q))
@@ -304,9 +391,10 @@ def _lbfgs(fg, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, maxiter: int, ste
         for a, rho, s_, y_ in reversed(hist):
             d += s_ * (a - rho * float(np.dot(y_, d)))
         d = -d
+        d[held] = 0.0
         if float(np.dot(d, g)) >= 0.0:                      # lost descent: steepest descent
             S.clear(), Y.clear()
-            d = -g * (step0 / gnorm)
+            d = -gf * (step0 / gnorm)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", LineSearchWarning)
             alpha, _, _, fn, _, gn = line_search(lambda z: ev(z)[0], lambda z: ev(z)[1], x, d, g, f, f_old,
@@ -383,7 +471,8 @@ def _sampled_fractions(c: np.ndarray, r: np.ndarray, smp: _Samples, v_real: floa
 # ----------------------------------------------------------------------------------------
 def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *, name: str = "clump",
               n_points: int = 30_000, n_seeds: int = 1500, refine: bool = True, match_volume: bool = True,
-              volume_weight: float = 10.0, max_iter: int = 30, seed: int = 0) -> tuple[ClumpTemplate, FillReport]:
+              volume_weight: float = 10.0, max_iter: int = 30, seed: int = 0, min_radius: float | None = None,
+              min_radius_fraction: float | None = None) -> tuple[ClumpTemplate, FillReport]:
     """Fill a closed mesh [m] with ``n_spheres`` overlapping spheres ("fast multi-sphere" method).
 
     Args:
@@ -399,12 +488,19 @@ def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *,
         volume_weight: weight of the volume-mismatch penalty during refinement (match_volume).
         max_iter: L-BFGS iterations per annealing stage.
         seed: RNG seed; the fill is deterministic for a given seed.
+        min_radius: absolute lower bound on every member radius [m] (None: not set).
+        min_radius_fraction: lower bound as a fraction of the volume-equivalent radius
+            r_eq = (3 V_R / 4 pi)^(1/3). None: ``DEFAULT_MIN_RADIUS_FRACTION`` (0.25) unless
+            ``min_radius`` is given; 0 with no ``min_radius``: no bound (only the optimiser's
+            floor of half a sample spacing, ~0.04 r_eq). With both, the larger bound holds.
 
     Returns:
-        (template in the principal body frame, :class:`FillReport`).
+        (template in the principal body frame, :class:`FillReport`). The template has
+        exactly ``n_spheres`` members, all of radius >= the bound (``FillReport.radius_bound``).
 
     Raises:
-        ConfigError: non-watertight / inconsistently wound / empty mesh, n_spheres < 1, density <= 0.
+        ConfigError: non-watertight / inconsistently wound / empty mesh, n_spheres < 1, density <= 0,
+            negative bound, or a bound above r_eq (one such sphere alone would exceed the particle volume).
     """
     t0 = time.perf_counter()
     check_mesh(mesh, f"fill_mesh '{name}'")
@@ -415,10 +511,13 @@ def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *,
     n = int(n_spheres)
     rng = np.random.default_rng(seed)
     v_real, area = float(mesh.volume), float(mesh.area)
+    scale = (3.0 * v_real / (4.0 * math.pi)) ** (1.0 / 3.0)          # r_eq [m]
+    r_bound = _radius_bound(name, scale, min_radius, min_radius_fraction)
+    rb = r_bound / scale                                                # normalised
+    notes: list[str] = []
 
     # normalised copy: centroid at 0, equivalent-sphere radius 1
     origin = mesh.center_mass
-    scale = (3.0 * v_real / (4.0 * math.pi)) ** (1.0 / 3.0)
     m = mesh.copy()
     m.apply_translation(-origin)
     m.apply_scale(1.0 / scale)
@@ -437,26 +536,45 @@ def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *,
     pick = rng.choice(len(inside_pts), size=min(n_seeds, len(inside_pts)), replace=False)
     cand = inside_pts[pick]
     crad = cKDTree(surf).query(cand)[0]
-    pin = inside_pts[rng.choice(len(inside_pts), size=min(6000, len(inside_pts)), replace=False)]
-    c, r = _greedy(cand, crad, pin, n)
+    n_pin = min(6000, len(inside_pts))
+    pin = inside_pts[rng.choice(len(inside_pts), size=n_pin, replace=False)]
+    pout = None
+    if rb > 0 and np.any(crad < rb):
+        # outside points that an inflated candidate (centre inside, radius rb) can reach,
+        # subsampled at the density of ``pin`` so that counts compare as volumes
+        out_pts = smp.points[~smp.inside]
+        near = out_pts[cKDTree(surf).query(out_pts, distance_upper_bound=rb)[0] < rb]
+        k_out = int(round(len(near) * n_pin / len(inside_pts)))
+        pout = near[rng.choice(len(near), size=k_out, replace=False)] if k_out > 0 else None
+    c, r = _greedy(cand, crad, pin, n, pout, rb)
 
+    refine_args = {}
     if refine:
         lo, hi = smp.points.min(0), smp.points.max(0)
-        c, r = _refine(c, r, smp, lo, hi, r_min=0.5 * smp.spacing, r_max=2.0 * float(crad.max()),
-                       iters=max_iter, mu=(volume_weight if match_volume else 0.0), v_target=v_norm)
+        refine_args = dict(smp=smp, lo=lo, hi=hi, r_min=max(0.5 * smp.spacing, rb),
+                           r_max=max(2.0 * float(crad.max()), 2.0 * rb), iters=max_iter, v_target=v_norm)
+        c, r = _refine(c, r, mu=(volume_weight if match_volume else 0.0), **refine_args)
+    r = np.maximum(r, rb)
 
     volume_scale = 1.0
     if match_volume:
-        # exact volume match: scale all radii by k so that V(union) = V_R (brentq on the
-        # quadrature volume of clump_geometry; |k - 1| is typically < 1 %)
-        vol = lambda k: union_mass_properties(c, k * r, 1.0, resolution=24).volume - v_norm  # noqa: E731
-        k_lo, k_hi = 0.9, 1.1
-        while vol(k_lo) > 0:
-            k_lo *= 0.9
-        while vol(k_hi) < 0:
-            k_hi *= 1.1
-        volume_scale = brentq(vol, k_lo, k_hi, xtol=1e-5)
-        r = r * volume_scale
+        volume_scale, excess = _match_volume(c, r, rb, v_norm)
+        v_soft = v_norm
+        for _ in range(3 if refine else 0):
+            if excess <= 0.0:
+                break
+            # even with every radius at the bound the union exceeds V_R. The optimiser's soft
+            # volume runs below the exact union volume (creases between overlapping balls), so
+            # it believes the volume matched: lower its target by the excess, weight the volume
+            # more, and let it pull the centres together
+            v_soft -= excess * v_norm
+            c, r = _refine(c, r, mu=10.0 * volume_weight, **{**refine_args, "v_target": v_soft})
+            r = np.maximum(r, rb)
+            volume_scale, excess = _match_volume(c, r, rb, v_norm)
+        if excess > 0.0:
+            notes.append(f"volume not matched: {n} spheres of radius >= {r_bound:.3g} m exceed V_R by "
+                         f"{excess:.1%} (all at the bound); lower the bound or n_spheres")
+        r = np.maximum(r * volume_scale, rb)
 
     # unbiased quality estimate on an independent sample (the optimiser has seen ``smp``)
     lo_t = np.minimum(lo_m, (c - r[:, None]).min(0)) - 0.01
@@ -468,15 +586,78 @@ def fill_mesh(mesh: trimesh.Trimesh, n_spheres: int, density: float = 2661.0, *,
     inside_c = _inside(m, c)
     protr = float(np.max(np.where(inside_c, r - dc, r + dc)))
 
+    n_redundant = _count_redundant(c, r, seed)
+    if n_redundant:
+        notes.append(f"{n_redundant} of {n} spheres lie (almost) entirely inside the others (exclusive volume "
+                     f"< 0.5 %): kept to honour n_spheres, but they add no shape; n_spheres={n - n_redundant} "
+                     f"would give about the same clump at a lower DEM cost")
+
     centers = c * scale + origin
-    radii = r * scale
+    radii = np.maximum(r * scale, r_bound)          # round-off must not undercut the bound
     tpl = make_template(centers, radii, density, name=name)
     rep = FillReport(n_spheres=n, mesh_volume=v_real, mesh_area=area, sphericity=sphericity(v_real, area),
                      clump_volume=tpl.volume, volume_error=relative_volume_error(tpl.volume, v_real),
                      outside_fraction=outside, missing_fraction=missing,
                      max_protrusion=max(0.0, protr * scale), radius_scale=volume_scale,
-                     time_s=time.perf_counter() - t0)
+                     time_s=time.perf_counter() - t0, min_radius=float(radii.min()),
+                     max_radius=float(radii.max()), radius_bound=r_bound, n_redundant=n_redundant,
+                     notes=tuple(notes))
     return tpl, rep
+
+
+def _match_volume(c: np.ndarray, r: np.ndarray, rb: float, v_target: float) -> tuple[float, float]:
+    """Factor k with V(union of balls max(k r_i, rb)) = v_target, and the relative excess volume
+    left when even k -> rb / max(r) (every ball at the bound) is too large (0 when matched).
+
+    brentq on the quadrature volume of clump_geometry; |k - 1| is typically < 1 %.
+    """
+    vol = lambda k: union_mass_properties(c, np.maximum(k * r, rb), 1.0, resolution=24).volume - v_target  # noqa: E731
+    k_floor = rb / float(r.max()) if rb > 0 else 0.0      # at or below it every radius sits at rb
+    k_lo, k_hi = 0.9, 1.1
+    while (v_lo := vol(k_lo)) > 0:
+        if k_lo <= k_floor:
+            return k_lo, v_lo / v_target
+        k_lo = max(k_lo * 0.9, k_floor)
+    while vol(k_hi) < 0:
+        k_hi *= 1.1
+    return float(brentq(vol, k_lo, k_hi, xtol=1e-5)), 0.0
+
+
+def _radius_bound(name: str, r_eq: float, min_radius: float | None, fraction: float | None) -> float:
+    """Lower bound on member radii [m] from the absolute and relative options (see fill_mesh)."""
+    if fraction is None:
+        fraction = DEFAULT_MIN_RADIUS_FRACTION if min_radius is None else 0.0
+    if not (math.isfinite(fraction) and fraction >= 0.0):
+        raise ConfigError(f"fill_mesh '{name}': min_radius_fraction must be >= 0, got {fraction}")
+    absolute = 0.0 if min_radius is None else float(min_radius)
+    if not (math.isfinite(absolute) and absolute >= 0.0):
+        raise ConfigError(f"fill_mesh '{name}': min_radius must be >= 0 m, got {min_radius}")
+    bound = max(absolute, fraction * r_eq)
+    if bound >= r_eq:
+        raise ConfigError(f"fill_mesh '{name}': radius bound {bound:.4g} m >= the volume-equivalent radius "
+                          f"{r_eq:.4g} m: a single such sphere exceeds the particle volume")
+    return bound
+
+
+def _count_redundant(c: np.ndarray, r: np.ndarray, seed: int) -> int:
+    return int(_redundant(c, r, seed).sum())
+
+
+def _redundant(c: np.ndarray, r: np.ndarray, seed: int, m: int = 800, tol: float = 0.005) -> np.ndarray:
+    """Members whose exclusive volume (not covered by the others) is < ``tol`` of their own (sampled)."""
+    n = len(r)
+    out = np.zeros(n, dtype=bool)
+    if n < 2:
+        return out
+    rng = np.random.default_rng(seed + 104729)
+    u = rng.normal(size=(m, 3))
+    u *= (rng.random(m) ** (1.0 / 3.0) / np.linalg.norm(u, axis=1))[:, None]    # uniform in the unit ball
+    for i in range(n):
+        p = c[i] + r[i] * u
+        d2 = _sqdist(p, c)
+        d2[:, i] = np.inf
+        out[i] = np.count_nonzero(~(d2 <= (r * r)[None, :]).any(1)) < tol * m
+    return out
 
 
 def clump_from_file(path: str | Path, n_spheres: int, density: float = 2661.0, scale: float = 1.0,

@@ -23,6 +23,12 @@ Psi cannot all be matched. ``basis="table"`` (default) matches V_R and the print
 (the surface area then differs from SA_rp by 4-13 %); ``basis="scan"`` matches V_R and SA_rp,
 i.e. Psi = (36 pi V_R^2)^(1/3) / SA_rp = 0.803, 0.820, 0.744, 0.892, 0.932.
 
+The fills (:func:`gravel_fill`) bound every member radius below by
+``warpdem.multisphere.DEFAULT_MIN_RADIUS_FRACTION`` (0.25) x the class's volume-equivalent
+radius, i.e. >= 1.80 (discoid), 1.88 (sphere), 1.97 (ellipsoid), 2.61 (cone) and 2.87 mm
+(prism): the smallest member sphere sets the DEM time step (Rayleigh time), and an
+unbounded fill may leave a sub-millimetre member.
+
 Meshes are in metres with the centroid at the origin. Rounded bodies are built exactly as
 Minkowski sums: conv(union of balls at the vertices of a convex polytope) = polytope ⊕ ball.
 """
@@ -228,24 +234,40 @@ def _fill_level_count(name: str, fill_level: str | int) -> int:
     return FILL_LEVELS[fill_level][name]
 
 
-@lru_cache(maxsize=64)
-def gravel_fill(name: str, fill_level: str | int = "medium", basis: str = "table"):
-    """Multi-sphere fill of one class: ``(ClumpTemplate at density 1 kg/m^3, FillReport)``. Cached."""
-    from .multisphere import fill_mesh  # local import: multisphere imports nothing from here
+def gravel_fill(name: str, fill_level: str | int = "medium", basis: str = "table",
+                min_radius_fraction: float | None = None):
+    """Multi-sphere fill of one class: ``(ClumpTemplate at density 1 kg/m^3, FillReport)``. Cached.
+
+    min_radius_fraction: lower bound on the member radii as a fraction of the class's
+    volume-equivalent radius (None: ``fill_mesh``'s default, 0.25; 0: unbounded).
+    ``FillReport.min_radius`` and ``FillReport.rayleigh_time_step()`` give the smallest
+    member and the Rayleigh time step it implies.
+    """
+    from .multisphere import DEFAULT_MIN_RADIUS_FRACTION  # local import: multisphere imports nothing from here
 
     _spec(name)
     n = _fill_level_count(name, fill_level)
-    return fill_mesh(shape_mesh(name, basis), n, density=1.0, name=name)
+    frac = DEFAULT_MIN_RADIUS_FRACTION if min_radius_fraction is None else float(min_radius_fraction)
+    return _gravel_fill(name, n, basis, frac)        # one cache entry however the arguments are spelt
+
+
+@lru_cache(maxsize=64)
+def _gravel_fill(name: str, n: int, basis: str, min_radius_fraction: float):
+    from .multisphere import fill_mesh
+
+    return fill_mesh(shape_mesh(name, basis), n, density=1.0, name=name, min_radius_fraction=min_radius_fraction)
 
 
 def gravel_templates(fill_level: str | int = "medium", density: float = 2661.0,
-                     basis: str = "table") -> dict[str, ClumpTemplate]:
+                     basis: str = "table", min_radius_fraction: float | None = None) -> dict[str, ClumpTemplate]:
     """Clump templates of the five classes, keyed like :func:`gravel_shape_mix`.
 
     fill_level: "low" | "medium" | "high" (Table 2 counts per class) or a sphere count.
     density: particle density [kg/m^3] (seed paper Sec. 2.3.2: 2661).
-    The fills are cached per (class, level, basis) for the life of the process.
+    min_radius_fraction: see :func:`gravel_fill` (None: default bound, 0.25 r_eq).
+    The fills are cached per (class, level, basis, bound) for the life of the process.
     """
     if not (density > 0 and math.isfinite(density)):
         raise ConfigError(f"gravel_templates: density must be > 0 kg/m^3, got {density}")
-    return {k: gravel_fill(k, fill_level, basis)[0].with_density(density) for k in SHAPE_CLASSES}
+    return {k: gravel_fill(k, fill_level, basis, min_radius_fraction)[0].with_density(density)
+            for k in SHAPE_CLASSES}
