@@ -168,6 +168,21 @@ def place_sphere_views(
     views[i] = sv
 
 
+@wp.func
+def angular_velocity_from_momentum(r: wp.quatd, l: wp.vec3d, inertia: wp.vec3d):
+    """w = R I^-1 R^T L (world frame) for principal inertia ``inertia``."""
+    return wp.quat_rotate(r, wp.cw_div(wp.quat_rotate_inv(r, l), inertia))
+
+
+@wp.func
+def rotate_by(r: wp.quatd, w: wp.vec3d, h: wp.float64):
+    """exp(h w) R: the orientation R turned by the rotation vector h w."""
+    wl = wp.length(w)
+    if wl * h < wp.float64(1.0e-300):
+        return r
+    return wp.normalize(wp.quat_from_axis_angle(w / wl, wl * h) * r)
+
+
 @wp.kernel
 def integrate_bodies(
     body_first: wp.array(dtype=int),
@@ -223,14 +238,25 @@ def integrate_bodies(
     m = body_mass[b]
     v = v_in[b] + (f / m + gravity) * dt
     x = q_in[b] + v * dt
-    r = rot_in[b]
-    inertia = body_inertia[b]
-    w_body = wp.quat_rotate_inv(r, w_in[b])
-    l_world = wp.quat_rotate(r, wp.cw_mul(inertia, w_body)) + t * dt
-    w_mid = wp.quat_rotate(r, wp.cw_div(wp.quat_rotate_inv(r, l_world), inertia))
-    dq = wp.quat(w_mid[0], w_mid[1], w_mid[2], 0.0) * r
-    r_new = wp.normalize(r + dq * (0.5 * dt))
-    w_new = wp.quat_rotate(r_new, wp.cw_div(wp.quat_rotate_inv(r_new, l_world), inertia))
+    # rotation in float64: angular momentum L = R I R^T w advanced by the torque, orientation
+    # by the implicit midpoint rule R' = exp(h w_half) R with w_half = w(L, exp(h/2 w_half) R)
+    # (three fixed-point sweeps); conserves |L| exactly and E to O(h^2) without float32 drift
+    rf = rot_in[b]
+    r = wp.normalize(wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3])))
+    inertia_f = body_inertia[b]
+    inertia = wp.vec3d(wp.float64(inertia_f[0]), wp.float64(inertia_f[1]), wp.float64(inertia_f[2]))
+    wf = w_in[b]
+    w0 = wp.vec3d(wp.float64(wf[0]), wp.float64(wf[1]), wp.float64(wf[2]))
+    h = wp.float64(dt)
+    l_world = wp.quat_rotate(r, wp.cw_mul(inertia, wp.quat_rotate_inv(r, w0))) + wp.vec3d(
+        wp.float64(t[0]), wp.float64(t[1]), wp.float64(t[2])) * h
+    w_half = angular_velocity_from_momentum(r, l_world, inertia)
+    for _sweep in range(3):
+        w_half = angular_velocity_from_momentum(rotate_by(r, w_half, wp.float64(0.5) * h), l_world, inertia)
+    r_new64 = rotate_by(r, w_half, h)
+    w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
+    r_new = wp.quat(float(r_new64[0]), float(r_new64[1]), float(r_new64[2]), float(r_new64[3]))
+    w_new = wp.vec3(float(w_new64[0]), float(w_new64[1]), float(w_new64[2]))
     if not (wp.isfinite(x) and wp.isfinite(v) and wp.isfinite(w_new)):
         wp.atomic_add(bad, 0, 1)
     q_out[b] = x
