@@ -14,7 +14,8 @@ from warpdem.geometry import cylinder_shell
 from ..filling import VerticalCylinder, body_tops, level
 from ..materials import BulkMaterial
 from ..measurement import CylinderPileResult, cylinder_pile_angle
-from .baffle import QUICK_MATERIAL
+
+QUICK_CYLINDER_MATERIAL = BulkMaterial.spheres(0.014, 0.018, name="quick spheres d=14-18 mm")
 from .common import Experiment, RunContext, fit_to_dict, rectangle
 
 __all__ = ["HollowCylinder"]
@@ -32,14 +33,18 @@ class HollowCylinder(Experiment):
     ``max_time_after_lift`` [s] after the lift ended (the spec gives no limit; this is the
     config's). Particles off the plate or below ``removal_z`` are removed.
     Measurement: four half-profiles, ``bin_width`` bins, fit band ``band`` x peak height.
-    Scale "quick": spheres d = 24-30 mm, lift at 0.1 m/s (paper 0.01 m/s), at most 3 s after.
+    Scale "quick": spheres d = 14-18 mm, 5 kg in a 150 mm cylinder, lift at 0.1 m/s (paper
+    0.01 m/s), at most 3 s after.
     """
 
     name: ClassVar[str] = "cylinder"
     angle_name: ClassVar[str] = "gamma_s"
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
         "paper": {},
-        "quick": {"material": QUICK_MATERIAL, "lift_speed": 0.1, "max_time_after_lift": 3.0, "bin_width": 0.020},
+        # smaller spheres in a narrower cylinder than the box/drum quick scale: with 24-30 mm spheres
+        # the pile is only 3-4 particles high and its flanks are not measurable
+        "quick": {"material": QUICK_CYLINDER_MATERIAL, "diameter": 0.150, "fill_mass": 5.0, "lift_speed": 0.1,
+                  "max_time_after_lift": 3.0, "bin_width": 0.020},
     }
 
     diameter: float = 0.200
