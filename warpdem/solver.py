@@ -71,7 +71,7 @@ class DEMSolver:
         neighbour_skin: Verlet skin [m] (default 0.3 * max radius): the neighbour list holds
             pairs closer than r_i + r_j + skin and is rebuilt (decided on the device, no host
             sync) once any sphere has moved more than skin / 2.
-        max_neighbours: list capacity per sphere (default 2 * max_contacts for free spheres of
+        max_neighbours: list capacity per sphere (default 3 * max_contacts for free spheres of
             similar size, 6 * max_contacts with clumps or r_max > 2 r_min); overflow is an error.
         conditional_rebuild: put the hash-grid build and list kernel behind a conditional graph
             node (``wp.capture_if``) so steps without a rebuild skip the grid build too.
@@ -103,11 +103,12 @@ class DEMSolver:
         if not self.skin > 0:
             raise ConfigError(f"neighbour_skin must be > 0 m, got {neighbour_skin}")
         if max_neighbours is None:
-            # a Verlet list of near-monodisperse free spheres holds ~12 entries; small members of
+            # a Verlet list of near-monodisperse free spheres holds ~12-20 entries (more while a
+            # loose fill is compressed by impacts); small members of
             # clumps or wide size distributions see many more neighbours within r_i + r_max + skin
             clumps = bool(np.any(model.host["body_count"] > 1))
             wide = model.max_radius > 2.0 * model.min_radius
-            max_neighbours = (6 if clumps or wide else 2) * model.max_contacts
+            max_neighbours = (6 if clumps or wide else 3) * model.max_contacts
         self.max_neighbours = int(max_neighbours)
         self.cell_size = 2.0 * model.max_radius + self.skin
         self.views = wp.zeros(n, dtype=kernels.SphereView, device=d)
