@@ -29,7 +29,7 @@ import numpy as np
 import warp as wp
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from settled_bed import D, loose_fill, morton_order  # noqa: E402  (reuse the settled-bed set-up)
+from settled_bed import D, loose_fill, morton_order, settle_and_time  # noqa: E402  (reuse the settled-bed set-up)
 
 import warpdem as wd  # noqa: E402
 from warpdem import geometry  # noqa: E402
@@ -114,17 +114,8 @@ def main(argv=None) -> dict:
     sim = wd.Simulation(model, dt, use_graph=None if not args.no_graph else False, steps_per_graph=50,
                         max_neighbours=args.max_neighbours)
     t_build = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    settle_sim_time = sim.settle(ke_per_particle=1e-6, max_time=args.settle_time, check_interval=0.05,
-                                 min_time=min(0.3, args.settle_time))
-    t_settle = time.perf_counter() - t0
+    settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps)
     ke = sim.kinetic_energy() / args.bodies
-    sim.run(args.warmup)
-    wp.synchronize_device(device)
-    t0 = time.perf_counter()
-    sim.run(args.steps, check_every=args.steps)
-    wp.synchronize_device(device)
-    seconds = time.perf_counter() - t0
     counts_c = sim.state.contact_count.numpy()
     spheres = model.num_spheres // args.worlds
     n_bodies = args.bodies * args.worlds

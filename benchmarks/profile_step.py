@@ -16,7 +16,6 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem import kernels
 
 from settled_bed import build  # noqa: E402  (run from benchmarks/ or with it on sys.path)
 
@@ -65,8 +64,7 @@ def main(argv=None):
     s, m, so = sim.state, model, sim.solver
 
     def place():
-        wp.launch(kernels.place_spheres, dim=m.num_spheres,
-                  inputs=[m.sphere_body, m.sphere_offset, s.body_q, s.body_rot, s.sphere_x], device=m.device)
+        so.place_spheres(s)
 
     def grid():
         so.grid.build(s.sphere_x, so.cell_size, groups=m.sphere_world)

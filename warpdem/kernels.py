@@ -102,20 +102,6 @@ def place_wall_vertices(
 
 
 # ----------------------------------------------------------------------------- bodies
-@wp.kernel
-def place_spheres(
-    sphere_body: wp.array(dtype=int),
-    sphere_offset: wp.array(dtype=wp.vec3),
-    body_q: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.quat),
-    sphere_x: wp.array(dtype=wp.vec3),
-):
-    """World position of each sphere from its body pose: x = X_b + R_b r_local."""
-    i = wp.tid()
-    b = sphere_body[i]
-    sphere_x[i] = body_q[b] + wp.quat_rotate(body_rot[b], sphere_offset[i])
-
-
 @wp.struct
 class SphereView:
     """What a contact needs of a sphere, packed in 64 bytes so that one neighbour costs one

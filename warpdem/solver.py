@@ -136,10 +136,7 @@ class DEMSolver:
                               wp.vec3(*w.motion.origin), float(w.motion.start), float(min(w.motion.stop, 3.0e38)),
                               state_in.time, w.mesh.points], device=d)
             w.mesh.refit()
-        wp.launch(kernels.place_sphere_views, dim=m.num_spheres, inputs=[
-            m.sphere_body, m.sphere_offset, m.sphere_radius, m.sphere_material, state_in.body_q, state_in.body_rot,
-            state_in.body_v, state_in.body_w, m.body_mass, m.body_inertia, state_in.body_active, state_in.sphere_x,
-            self.views], device=d)
+        self.place_spheres(state_in)
         wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
                   inputs=[state_in.sphere_x, self.x_at_build, 0.5 * self.skin, self.rebuild], device=d)
         if self.conditional_rebuild:
@@ -155,6 +152,14 @@ class DEMSolver:
             self.bad], device=d)
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
 
+
+    def place_spheres(self, state: State) -> None:
+        """Sphere positions (``state.sphere_x``) and packed views from the body poses."""
+        m = self.model
+        wp.launch(kernels.place_sphere_views, dim=m.num_spheres, inputs=[
+            m.sphere_body, m.sphere_offset, m.sphere_radius, m.sphere_material, state.body_q, state.body_rot,
+            state.body_v, state.body_w, m.body_mass, m.body_inertia, state.body_active, state.sphere_x,
+            self.views], device=m.device)
 
     def _build_neighbour_list(self, state: State) -> None:
         """Rebuild the Verlet list if ``self.rebuild`` is set (decided on the device).
@@ -319,11 +324,8 @@ class Simulation:
 
     def sphere_positions(self) -> np.ndarray:
         """World positions of all spheres at the current state (n, 3) [m]."""
-        m = self.model
-        s = self.state
-        wp.launch(kernels.place_spheres, dim=m.num_spheres,
-                  inputs=[m.sphere_body, m.sphere_offset, s.body_q, s.body_rot, s.sphere_x], device=m.device)
-        return s.sphere_x.numpy().astype(np.float64)
+        self.solver.place_spheres(self.state)
+        return self.state.sphere_x.numpy().astype(np.float64)
 
     def remove_outside(self, lower, upper) -> int:
         """Deactivate bodies whose centre is outside the box; returns how many were removed now."""
