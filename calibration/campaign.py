@@ -251,13 +251,20 @@ class Campaign:
                     done[(rec["index"], rec["response"])] = rec
         return done
 
-    def run_design(self, progress: bool = True) -> dict[tuple[int, str], dict]:
-        """Run every (sample, response) not yet in ``samples.jsonl``, batch by batch."""
+    def run_design(self, progress: bool = True, max_samples: int | None = None) -> dict[tuple[int, str], dict]:
+        """Run every (sample, response) not yet in ``samples.jsonl``, batch by batch.
+
+        ``max_samples``: run at most this many new design samples per response in this call (a
+        campaign too long for one sitting is run in parts; ``samples.jsonl`` keeps every part)."""
         X = self.design()
         names = [p.name for p in self.cfg.space.parameters]
         done = self._done()
+        if max_samples is not None and max_samples < 1:
+            raise ConfigError(f"max_samples must be >= 1, got {max_samples}")
         for resp in self.cfg.responses:
             todo = [i for i in range(len(X)) if (i, resp.name) not in done]
+            if max_samples is not None:
+                todo = todo[:max_samples]
             if not todo:
                 continue
             self.log(f"{resp.name}: {len(todo)} of {len(X)} samples to run ({resp.experiment}, scale {resp.scale})")
@@ -439,9 +446,22 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", default=None, help="output folder (default: the config's 'output')")
     ap.add_argument("--device", default=None)
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--max-samples", type=int, default=None,
+                    help="run at most N new design samples per response, then stop before the analysis "
+                         "(run the command again to continue; nothing already run is repeated)")
     args = ap.parse_args(argv)
     cfg = load_config(args.config)
     if args.device:
         cfg.device = args.device
-    Campaign(cfg, args.out).run(progress=not args.no_progress)
+    campaign = Campaign(cfg, args.out)
+    if args.max_samples is not None:
+        t0 = time.perf_counter()
+        done = campaign.run_design(progress=not args.no_progress, max_samples=args.max_samples)
+        for resp in cfg.responses:
+            recs = [r for (i, name), r in done.items() if name == resp.name]
+            ok = sum(r["status"] == "ok" for r in recs)
+            campaign.log(f"{resp.name}: {len(recs)} of {cfg.samples} samples done ({ok} ok)")
+        campaign.log(f"part finished in {time.perf_counter() - t0:.1f} s; run again to continue")
+        return 0
+    campaign.run(progress=not args.no_progress)
     return 0

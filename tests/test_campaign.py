@@ -95,6 +95,24 @@ def test_interrupted_campaign_loses_nothing(tmp_path, fake_dem):
     assert sum(n for _, n in fake_dem) == len(lines) - 7
 
 
+def test_campaign_in_parts_from_the_command_line(tmp_path, fake_dem):
+    """`warpdem calibrate CONFIG --max-samples N` runs N new samples per response and stops."""
+    import yaml
+
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(BASE))
+    out = tmp_path / "out"
+    assert cp.calibrate_main([str(path), "--out", str(out), "--max-samples", "6", "--no-progress"]) == 0
+    recs = [json.loads(line) for line in (out / "samples.jsonl").read_text().splitlines()]
+    assert sorted((r["response"], r["index"]) for r in recs) == sorted((n, i) for n in ("alpha", "beta") for i in range(6))
+    assert not (out / "results.json").exists()  # stopped before the analysis
+    cp.calibrate_main([str(path), "--out", str(out), "--max-samples", "6", "--no-progress"])
+    recs = [json.loads(line) for line in (out / "samples.jsonl").read_text().splitlines()]
+    assert len(recs) == 2 * 12 and len({(r["response"], r["index"]) for r in recs}) == 24
+    with pytest.raises(ConfigError, match="max_samples"):
+        cp.Campaign(cp.parse_config(BASE), out, verbose=False).run_design(progress=False, max_samples=0)
+
+
 def test_failed_runs_recorded_not_dropped(tmp_path, fake_dem):
     cfg = cp.parse_config({**BASE, "parameters": {"mu_s_pp": [0.5, 0.8], "mu_s_pw": [0.1, 0.8]}})
     done = cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
