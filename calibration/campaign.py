@@ -251,17 +251,28 @@ class Campaign:
                     done[(rec["index"], rec["response"])] = rec
         return done
 
-    def run_design(self, progress: bool = True, max_samples: int | None = None) -> dict[tuple[int, str], dict]:
+    def run_design(self, progress: bool = True, max_samples: int | None = None,
+                   retry_failed: bool = False, responses: Sequence[str] | None = None) -> dict[tuple[int, str], dict]:
         """Run every (sample, response) not yet in ``samples.jsonl``, batch by batch.
 
         ``max_samples``: run at most this many new design samples per response in this call (a
-        campaign too long for one sitting is run in parts; ``samples.jsonl`` keeps every part)."""
+        campaign too long for one sitting is run in parts; ``samples.jsonl`` keeps every part).
+        ``retry_failed``: run failed samples again (their old records stay in the file; the
+        newest record of a sample is the one used). ``responses``: run only these responses."""
         X = self.design()
         names = [p.name for p in self.cfg.space.parameters]
         done = self._done()
+        if retry_failed:
+            done = {k: r for k, r in done.items() if r["status"] == "ok"}
         if max_samples is not None and max_samples < 1:
             raise ConfigError(f"max_samples must be >= 1, got {max_samples}")
+        known = [r.name for r in self.cfg.responses]
+        unknown = sorted(set(responses or ()) - set(known))
+        if unknown:
+            raise ConfigError(f"unknown response(s) {unknown}; this campaign has {known}")
         for resp in self.cfg.responses:
+            if responses is not None and resp.name not in responses:
+                continue
             todo = [i for i in range(len(X)) if (i, resp.name) not in done]
             if max_samples is not None:
                 todo = todo[:max_samples]
@@ -446,22 +457,30 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", default=None, help="output folder (default: the config's 'output')")
     ap.add_argument("--device", default=None)
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--retry-failed", action="store_true", help="run the samples recorded as failed again")
+    ap.add_argument("--only", nargs="+", default=None, metavar="RESPONSE",
+                    help="with --max-samples: run only these responses (e.g. alpha_static)")
     ap.add_argument("--max-samples", type=int, default=None,
                     help="run at most N new design samples per response, then stop before the analysis "
                          "(run the command again to continue; nothing already run is repeated)")
     args = ap.parse_args(argv)
+    if args.only is not None and args.max_samples is None:
+        ap.error("--only needs --max-samples (the analysis uses every response)")
     cfg = load_config(args.config)
     if args.device:
         cfg.device = args.device
     campaign = Campaign(cfg, args.out)
     if args.max_samples is not None:
         t0 = time.perf_counter()
-        done = campaign.run_design(progress=not args.no_progress, max_samples=args.max_samples)
+        done = campaign.run_design(progress=not args.no_progress, max_samples=args.max_samples,
+                                   retry_failed=args.retry_failed, responses=args.only)
         for resp in cfg.responses:
             recs = [r for (i, name), r in done.items() if name == resp.name]
             ok = sum(r["status"] == "ok" for r in recs)
             campaign.log(f"{resp.name}: {len(recs)} of {cfg.samples} samples done ({ok} ok)")
         campaign.log(f"part finished in {time.perf_counter() - t0:.1f} s; run again to continue")
         return 0
+    if args.retry_failed:
+        campaign.run_design(progress=not args.no_progress, retry_failed=True)
     campaign.run(progress=not args.no_progress)
     return 0

@@ -109,6 +109,11 @@ def test_campaign_in_parts_from_the_command_line(tmp_path, fake_dem):
     cp.calibrate_main([str(path), "--out", str(out), "--max-samples", "6", "--no-progress"])
     recs = [json.loads(line) for line in (out / "samples.jsonl").read_text().splitlines()]
     assert len(recs) == 2 * 12 and len({(r["response"], r["index"]) for r in recs}) == 24
+    cp.calibrate_main([str(path), "--out", str(out), "--max-samples", "2", "--only", "beta", "--no-progress"])
+    recs = [json.loads(line) for line in (out / "samples.jsonl").read_text().splitlines()]
+    assert [(r["response"], r["index"]) for r in recs[24:]] == [("beta", 12), ("beta", 13)]
+    with pytest.raises(ConfigError, match="unknown response"):
+        cp.Campaign(cp.parse_config(BASE), out, verbose=False).run_design(progress=False, responses=["gamma"])
     with pytest.raises(ConfigError, match="max_samples"):
         cp.Campaign(cp.parse_config(BASE), out, verbose=False).run_design(progress=False, max_samples=0)
 
@@ -118,6 +123,13 @@ def test_failed_runs_recorded_not_dropped(tmp_path, fake_dem):
     done = cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
     failed = [r for r in done.values() if r["status"] == "failed"]
     assert failed and all("StabilityError" in r["error"] for r in failed)
+    # a plain resume does not repeat them; --retry-failed does, and the newest record wins
+    fake_dem.clear()
+    cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
+    assert fake_dem == []
+    again = cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False, retry_failed=True)
+    assert sum(n for _, n in fake_dem) == len(failed)
+    assert cp.Campaign(cfg, tmp_path, verbose=False)._done() == again
 
 
 @pytest.mark.slow

@@ -191,3 +191,24 @@ def test_new_submodel_is_one_registration():
         assert f[0, 0] > 0.4 and f[1, 0] < -0.4
     finally:
         del REGISTRY["cohesion"]["test_constant_pull"]
+
+
+def test_removed_bodies_leave_the_neighbour_lists():
+    """Bodies removed by remove_outside stay where they left but take no part in contacts or
+    neighbour lists (otherwise removed particles piling up at an outflow edge overflow the
+    lists of the active ones passing by)."""
+    b = wd.ModelBuilder(gravity=(0, 0, 0))
+    b.add_material(wd.GRAVEL)
+    g = np.arange(3) * 0.0185
+    cluster = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) + (0.10, 0.0, 0.0)
+    b.add_spheres(cluster, R, "gravel")
+    b.add_sphere((0.10 - 0.0185, 0.0185, 0.0185), R, "gravel")  # touches the cluster's face
+    sim = wd.Simulation(b.finalize("cpu"), 1e-5)
+    sim.run(2)
+    probe = len(cluster)
+    assert sim.solver.nb_count.numpy()[probe] > 0
+    assert sim.remove_outside((-1.0, -1.0, -1.0), (0.095, 1.0, 1.0)) == len(cluster)
+    sim.solver.request_neighbour_rebuild()
+    sim.run(2)
+    assert sim.solver.nb_count.numpy()[probe] == 0
+    assert np.allclose(sim.state.body_v.numpy()[probe], 0.0)  # no force from removed bodies

@@ -245,3 +245,21 @@ def test_quick_baffle_spread_of_friction_is_monotonic():
     per_world = [r.angle_deg if r.ok else 0.0 for r in res]
     angles = [float(np.mean(per_world[k * reps:(k + 1) * reps])) for k in range(len(vals))]
     assert all(b > a for a, b in zip(angles, angles[1:])), angles
+
+
+def test_slot_overflow_reruns_with_more_slots_or_names_the_capacity():
+    """A neighbour list too small for the packing is re-run from the same fill with the
+    capacity the overflow reported (recorded in the timing); with retries off the error names
+    the capacity needed."""
+    exp = make_experiment("baffle", "quick", max_neighbours=3)
+    r = exp.run([{"mu_s_pp": 0.5}], device="cpu")[0]
+    assert r.ok, r.error
+    retries = r.timing["retries"]
+    assert 1 <= len(retries) <= exp.overflow_retries and retries[0]["capacity"] == 3
+    for retry in retries:
+        assert retry["kind"] == "neighbours" and retry["needed"] > retry["capacity"]
+        assert retry["rerun_with"] >= 1.25 * retry["needed"]
+    assert r.timing["max_neighbours"] == retries[-1]["rerun_with"]
+    strict = make_experiment("baffle", "quick", max_neighbours=3, overflow_retries=0)
+    r = strict.run([{"mu_s_pp": 0.5}], device="cpu")[0]
+    assert not r.ok and "max_neighbours >=" in r.error and r.timing["retries"] == []

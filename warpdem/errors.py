@@ -14,7 +14,16 @@ class StabilityError(WarpDEMError):
 
 
 class ContactOverflowError(WarpDEMError):
-    """A sphere had more contacts than its contact slots can hold."""
+    """A sphere had more contacts (``kind="contacts"``) or neighbour-list entries
+    (``kind="neighbours"``) than its slots can hold. ``capacity``: the slots it had;
+    ``needed``: the largest count seen, where known."""
+
+    def __init__(self, message: str, kind: str = "contacts", capacity: int | None = None,
+                 needed: int | None = None) -> None:
+        super().__init__(message)
+        self.kind = kind
+        self.capacity = capacity
+        self.needed = needed
 
 
 class OverlapError(WarpDEMError):

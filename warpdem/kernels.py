@@ -310,18 +310,22 @@ def build_neighbour_list(
     b = sphere_body[i]
     base = i * max_neighbours
     n = int(0)
+    n_all = int(0)
     if body_active[b] != 0:
         q = wp.hash_grid_query(grid, xi, ri + max_radius + skin, sphere_world[i])
         j = int(0)
         while wp.hash_grid_query_next(q, j):
-            if sphere_body[j] == b:
+            bj = sphere_body[j]
+            if bj == b or body_active[bj] == 0:  # removed bodies stay where they left, out of play
                 continue
             d = xi - sphere_x[j]
             reach = ri + sphere_radius[j] + skin
             if wp.dot(d, d) >= reach * reach:
                 continue
             if n >= max_neighbours:
+                # overflow[0]: entries dropped; overflow[1]: the largest list any sphere needed
                 wp.atomic_add(overflow, 0, 1)
+                n_all += 1
                 continue
             # insertion keeps the list sorted by index
             k = n
@@ -331,6 +335,8 @@ def build_neighbour_list(
             nb_index[base + k] = j
             n += 1
     nb_count[i] = n
+    if n_all > 0:
+        wp.atomic_max(overflow, 1, n + n_all)
     near = int(0)
     if body_active[b] != 0:
         ext = wp.vec3(ri + skin, ri + skin, ri + skin)

@@ -72,7 +72,8 @@ class DEMSolver:
             pairs closer than r_i + r_j + skin and is rebuilt (decided on the device, no host
             sync) once any sphere has moved more than skin / 2.
         max_neighbours: list capacity per sphere (default 3 * max_contacts for free spheres of
-            similar size, 6 * max_contacts with clumps or r_max > 2 r_min); overflow is an error.
+            similar size, 6 x with r_max > 2 r_min, 8 x with clumps); overflow is an error that names
+            the capacity needed.
         conditional_rebuild: put the hash-grid build and list kernel behind a conditional graph
             node (``wp.capture_if``) so steps without a rebuild skip the grid build too.
     """
@@ -108,7 +109,7 @@ class DEMSolver:
             # clumps or wide size distributions see many more neighbours within r_i + r_max + skin
             clumps = bool(np.any(model.host["body_count"] > 1))
             wide = model.max_radius > 2.0 * model.min_radius
-            max_neighbours = (6 if clumps or wide else 3) * model.max_contacts
+            max_neighbours = (8 if clumps else 6 if wide else 3) * model.max_contacts
         self.max_neighbours = int(max_neighbours)
         self.cell_size = 2.0 * model.max_radius + self.skin
         self.views = wp.zeros(n, dtype=kernels.SphereView, device=d)
@@ -117,7 +118,7 @@ class DEMSolver:
         self.near_wall = wp.zeros(n, dtype=int, device=d)
         self.x_at_build = wp.zeros(n, dtype=wp.vec3, device=d)
         self.rebuild = wp.ones(1, dtype=int, device=d)
-        self.nb_overflow = wp.zeros(1, dtype=int, device=d)
+        self.nb_overflow = wp.zeros(2, dtype=int, device=d)  # [dropped, largest list needed]
         self.list_builds = wp.zeros(1, dtype=int, device=d)
         self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
         self.kernel = kernels.contact_kernel(model.contact_law)
@@ -204,17 +205,19 @@ class DEMSolver:
         """Raise if a contact slot overflowed or a state became non-finite since the last check."""
         ov = int(self.overflow.numpy()[0])
         bad = int(self.bad.numpy()[0])
-        nb_ov = int(self.nb_overflow.numpy()[0])
+        nb_ov, nb_needed = (int(v) for v in self.nb_overflow.numpy())
         if nb_ov:
             self.nb_overflow.zero_()
             raise ContactOverflowError(
-                f"{nb_ov} neighbour(s) did not fit the {self.max_neighbours} neighbour-list slots per sphere; "
-                f"pass a larger max_neighbours (or a smaller neighbour_skin) to the solver")
+                f"{nb_ov} neighbour(s) did not fit the {self.max_neighbours} neighbour-list slots per sphere "
+                f"(a sphere needed {nb_needed}); pass max_neighbours >= {nb_needed} (or a smaller "
+                f"neighbour_skin) to the solver", kind="neighbours", capacity=self.max_neighbours, needed=nb_needed)
         if ov:
             self.overflow.zero_()
             raise ContactOverflowError(
                 f"{ov} contact(s) did not fit the {self.model.max_contacts} slots per sphere and would have been "
-                f"dropped; build the model with a larger max_contacts")
+                f"dropped; build the model with a larger max_contacts", kind="contacts",
+                capacity=self.model.max_contacts)
         if bad:
             self.bad.zero_()
             raise StabilityError(

@@ -250,8 +250,11 @@ class Experiment:
     ke_per_particle: settled criterion [J] (spec A: 1e-6); fill_settle_max_time [s] (spec A: 1.5;
         extended by the fall time when the loose column stands above the walls).
     settle_check_interval, removal_interval: [s] between KE checks / removals of escaped particles.
-    max_contacts: contact slots per sphere. seed: fill RNG seed. fill_per_world: a different
-        loose fill in every world (default: the same fill everywhere).
+    max_contacts: contact slots per sphere; max_neighbours: neighbour-list slots per sphere (None:
+        the solver's default). A run whose slots overflow is run again from the same fill with
+        more slots (``overflow_retries`` times at most; recorded in ``timing["retries"]``).
+    seed: fill RNG seed. fill_per_world: a different loose fill in every world (default: the
+        same fill everywhere).
     """
 
     name: ClassVar[str] = "experiment"
@@ -270,6 +273,8 @@ class Experiment:
     settle_check_interval: float = 0.02
     removal_interval: float = 0.05
     max_contacts: int = 16
+    max_neighbours: int | None = None
+    overflow_retries: int = 2
     seed: int = 0
     fill_per_world: bool = False
     wall_material: wd.Material = wd.PLEXIGLAS
@@ -311,6 +316,10 @@ class Experiment:
             self._check_positive("dt")
         if int(self.max_contacts) < 1:
             raise ConfigError(f"{self.name}: max_contacts must be >= 1, got {self.max_contacts}")
+        if self.max_neighbours is not None and int(self.max_neighbours) < 1:
+            raise ConfigError(f"{self.name}: max_neighbours must be >= 1 or null, got {self.max_neighbours}")
+        if int(self.overflow_retries) < 0:
+            raise ConfigError(f"{self.name}: overflow_retries must be >= 0, got {self.overflow_retries}")
         wd.ContactLaw(rolling=self.rolling)  # raises a ConfigError for an unknown model
         if not isinstance(self.contact_defaults, Mapping):
             raise ConfigError(f"{self.name}: contact_defaults must be a mapping of parameter names to values")
@@ -412,6 +421,30 @@ class Experiment:
         max_time = self.fill_settle_max_time + extra
         return min(t_fall, max_time), max_time
 
+    def _build_model(self, law: wd.ContactLaw, material: BulkMaterial, fills: list[FillResult],
+                     sets: list[dict[str, float]], defaults: dict[str, float], t_motion: float, device: str | None,
+                     max_contacts: int, max_neighbours: int | None):
+        """Model (one world per parameter set), its Simulation, the time step and its limits."""
+        nw = len(sets)
+        builder = wd.ModelBuilder(num_worlds=nw, contact_law=law, max_contacts=max_contacts)
+        builder.add_material(material.particle)
+        if self.wall_material.name != material.particle.name:
+            builder.add_material(self.wall_material)
+        for w in range(nw):
+            add_fill(builder, fills[w if self.fill_per_world else 0], material.particle.name, w)
+        self.add_walls(builder, max(f.top for f in fills), t_motion, material)
+        if defaults:
+            builder.set_contact_parameters(**defaults)
+        for w, ps in enumerate(sets):
+            if ps:
+                builder.set_contact_parameters(world=w, **ps)
+        # a settled (poured) fill starts with its contacts' small Hertz overlaps: check leniently
+        model = builder.finalize(device, overlap_tolerance=1.0 if any(f.settled for f in fills) else 0.05)
+        limits = wd.time_step_limits(model, self.v_ref)
+        dt = self.dt if self.dt is not None else limits.recommended
+        sim = wd.Simulation(model, dt, v_ref=self.v_ref, force=self.force_dt, max_neighbours=max_neighbours)
+        return model, sim, dt, limits
+
     def run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None = None,
             progress: bool = False) -> list[ExperimentResult]:
         """Run the experiment, one world per parameter set (contact parameters by the model's
@@ -426,35 +459,41 @@ class Experiment:
             fills = [self.make_fill(material, np.random.default_rng([self.seed, w]), device) for w in range(nw)]
         else:
             fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
-        builder = wd.ModelBuilder(num_worlds=nw, contact_law=law, max_contacts=self.max_contacts)
-        builder.add_material(material.particle)
-        if self.wall_material.name != material.particle.name:
-            builder.add_material(self.wall_material)
-        for w in range(nw):
-            add_fill(builder, fills[w if self.fill_per_world else 0], material.particle.name, w)
         _, t_motion = self.fill_settle_times(fills)
-        self.add_walls(builder, max(f.top for f in fills), t_motion, material)
-        if defaults:
-            builder.set_contact_parameters(**defaults)
-        for w, ps in enumerate(sets):
-            if ps:
-                builder.set_contact_parameters(world=w, **ps)
-        # a settled (poured) fill starts with its contacts' small Hertz overlaps: check leniently
-        model = builder.finalize(device, overlap_tolerance=1.0 if any(f.settled for f in fills) else 0.05)
-        limits = wd.time_step_limits(model, self.v_ref)
-        dt = self.dt if self.dt is not None else limits.recommended
-        sim = wd.Simulation(model, dt, v_ref=self.v_ref, force=self.force_dt)
-        ctx = RunContext(self, sim, fills, progress)
-        ctx.log(f"{nw} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, dt={dt:.3g} s "
-                f"(limit {limits.limit:.3g} s)")
-        build_s = time.perf_counter() - wall0
-        sim0 = time.perf_counter()
-        outcome: list[dict[str, Any]] = [dict() for _ in range(nw)]
-        fatal = None
-        try:
-            outcome = self.protocol(ctx, t_motion)
-        except (StabilityError, ContactOverflowError) as exc:
-            fatal = f"{type(exc).__name__}: {exc}"
+        max_contacts, max_neighbours = int(self.max_contacts), self.max_neighbours
+        retries: list[dict[str, Any]] = []
+        while True:
+            model, sim, dt, limits = self._build_model(law, material, fills, sets, defaults, t_motion, device,
+                                                       max_contacts, max_neighbours)
+            ctx = RunContext(self, sim, fills, progress)
+            ctx.log(f"{nw} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, dt={dt:.3g} s "
+                    f"(limit {limits.limit:.3g} s)")
+            if not retries:
+                build_s = time.perf_counter() - wall0
+            sim0 = time.perf_counter()
+            outcome: list[dict[str, Any]] = [dict() for _ in range(nw)]
+            fatal = None
+            try:
+                outcome = self.protocol(ctx, t_motion)
+            except ContactOverflowError as exc:
+                fatal = f"{type(exc).__name__}: {exc}"
+                if len(retries) < int(self.overflow_retries):
+                    # slots are sized before the run; a denser packing than expected is not an
+                    # error of the user's: run again from the same fill with room to spare
+                    if exc.kind == "neighbours":
+                        old = sim.solver.max_neighbours
+                        max_neighbours = max(int(math.ceil(1.25 * (exc.needed or 0))), int(math.ceil(1.5 * old)))
+                        new = max_neighbours
+                    else:
+                        old = max_contacts
+                        max_contacts = new = int(math.ceil(1.5 * max_contacts))
+                    retries.append(dict(kind=exc.kind, capacity=old, needed=exc.needed, rerun_with=new,
+                                        wasted_s=round(time.perf_counter() - sim0, 3)))
+                    ctx.log(f"{exc.kind} slots overflowed ({exc}); running again with {new} slots per sphere")
+                    continue
+            except StabilityError as exc:
+                fatal = f"{type(exc).__name__}: {exc}"
+            break
         sim_s = time.perf_counter() - sim0
         timing = {"wall_s": round(time.perf_counter() - wall0, 3), "build_s": round(build_s, 3),
                   "simulate_s": round(sim_s, 3), "steps": int(sim.steps), "dt_s": dt,
@@ -462,7 +501,8 @@ class Experiment:
                   "phases_s": {k: round(v, 6) for k, v in ctx.phases.items()},
                   "worlds": nw, "spheres": int(model.num_spheres), "bodies": int(model.num_bodies),
                   "spheres_per_world": int(model.num_spheres // nw), "device": str(model.device),
-                  "note": "timing is for the whole run (all worlds together)"}
+                  "max_contacts": int(model.max_contacts), "max_neighbours": int(sim.solver.max_neighbours),
+                  "retries": retries, "note": "timing is for the whole run (all worlds together, retries included)"}
         protocol = {"scale": self.scale, "settings": self.settings(), "deviations_from_paper": self.deviations_from_paper(),
                     "contact_law": law.describe(), "t_motion_start_s": t_motion,
                     "fill": {"particles_per_world": int(fills[0].sample.n),
