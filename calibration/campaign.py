@@ -35,10 +35,10 @@ from warpdem import ConfigError
 
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
-from .experiments.common import _jsonable
+from .experiments.common import _jsonable, cpu_processes
 from .measurement.records import load_measurements
 
-TOP_KEYS = {"name", "device", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
+TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
             "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity"}
 RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target", "replicates"}
 
@@ -72,6 +72,7 @@ class CampaignConfig:
     seed: int = 0
     batch_worlds: int = 8
     device: str | None = None
+    processes: int | str = "auto"
     output: str = "results/calibration"
     optimisation: dict[str, Any] = field(default_factory=dict)
     confirmation_runs: int = 1
@@ -141,7 +142,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         validation=_response(raw["validation"], f"{source}: validation") if raw.get("validation") else None,
         fixed=fixed, rolling=law.rolling, samples=int(design.get("samples", 24)),
         held_out=int(design.get("held_out", 6)), seed=int(design.get("seed", 0)),
-        batch_worlds=int(raw.get("batch_worlds", 8)), device=raw.get("device"),
+        batch_worlds=int(raw.get("batch_worlds", 8)), device=raw.get("device"), processes=raw.get("processes", "auto"),
         output=str(raw.get("output", "results/calibration")), optimisation=dict(raw.get("optimisation") or {}),
         confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
         refine_rounds=int((raw.get("confirmation") or {}).get("refine_rounds", 0)),
@@ -154,6 +155,10 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
                           f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
     if cfg.batch_worlds < 1:
         raise ConfigError(f"{source}: batch_worlds must be >= 1")
+    try:
+        cpu_processes(cfg.processes, "cpu")
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
     return cfg
 
 
@@ -174,7 +179,7 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
     sets = [{**cfg.fixed, **p} for p in parameter_sets for _ in range(r)]
     t0 = time.perf_counter()
     try:
-        results = exp.run(sets, device=cfg.device, progress=progress)
+        results = exp.run(sets, device=cfg.device, progress=progress, processes=cfg.processes)
     except (wd.StabilityError, wd.ContactOverflowError) as exc:  # the whole batch failed
         return [dict(status="failed", error=f"{type(exc).__name__}: {exc}", angle_deg=None) for _ in parameter_sets]
     wall = time.perf_counter() - t0

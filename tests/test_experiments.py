@@ -263,3 +263,25 @@ def test_slot_overflow_reruns_with_more_slots_or_names_the_capacity():
     strict = make_experiment("baffle", "quick", max_neighbours=3, overflow_retries=0)
     r = strict.run([{"mu_s_pp": 0.5}], device="cpu")[0]
     assert not r.ok and "max_neighbours >=" in r.error and r.timing["retries"] == []
+
+
+def test_cpu_worlds_split_over_processes_keep_order_and_parameters():
+    """processes=2 runs the worlds in two spawned interpreters; results come back in world
+    order with their own parameters and per-world fills (seeded by the global world index)."""
+    from calibration.experiments.common import cpu_processes
+
+    exp = make_experiment("baffle", "quick", fill_mass=8.0, max_time_after_lift=1.6, fill_per_world=True)
+    sets = [{"mu_s_pp": v} for v in (0.3, 0.4, 0.5)]
+    res = exp.run(sets, device="cpu", processes=2)
+    assert [r.world for r in res] == [0, 1, 2]
+    assert [r.parameters["mu_s_pp"] for r in res] == [0.3, 0.4, 0.5]
+    assert [r.contact_parameters["mu_s_pp"] for r in res] == pytest.approx([0.3, 0.4, 0.5])
+    assert {r.timing["processes"] for r in res} == {2} and res[2].timing["chunk_first_world"] == 2
+    # world 2 ran alone in the second process with the fill of global world 2
+    alone = make_experiment("baffle", "quick", fill_mass=8.0, max_time_after_lift=1.6, fill_per_world=True,
+                            first_fill_index=2).run(sets[2:], device="cpu")[0]
+    assert alone.diagnostics["particles_before_lift"] == res[2].diagnostics["particles_before_lift"]
+    assert alone.angle_deg == res[2].angle_deg
+    assert cpu_processes("auto", "cuda") == 1 and cpu_processes(3, "cpu") == 3
+    with pytest.raises(wd.ConfigError, match="processes"):
+        cpu_processes(0, "cpu")

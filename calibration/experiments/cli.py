@@ -27,8 +27,8 @@ from . import EXPERIMENTS, ExperimentResult, make_experiment
 
 __all__ = ["experiment_main", "load_config", "run_config", "plot_result"]
 
-CONFIG_KEYS = ("experiment", "scale", "device", "output", "material", "settings", "parameters", "progress",
-               "description")
+CONFIG_KEYS = ("experiment", "scale", "device", "processes", "output", "material", "settings", "parameters",
+               "progress", "description")
 
 
 def load_config(path: str | os.PathLike) -> dict[str, Any]:
@@ -69,15 +69,16 @@ def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
     return dict(cfg)
 
 
-def run_config(cfg: Mapping[str, Any], device: str | None = None, progress: bool | None = None
-               ) -> tuple[list[ExperimentResult], Any]:
+def run_config(cfg: Mapping[str, Any], device: str | None = None, progress: bool | None = None,
+               processes: int | str | None = None) -> tuple[list[ExperimentResult], Any]:
     """Build the experiment of a checked config and run it; returns (results, experiment)."""
     settings = dict(cfg.get("settings") or {})
     if cfg.get("material") is not None:
         settings["material"] = cfg["material"]
     exp = make_experiment(cfg["experiment"], cfg.get("scale", "paper"), **settings)
     results = exp.run(cfg["parameters"], device=device or cfg.get("device"),
-                      progress=bool(cfg.get("progress", False) if progress is None else progress))
+                      progress=bool(cfg.get("progress", False) if progress is None else progress),
+                      processes=processes if processes is not None else cfg.get("processes", "auto"))
     return results, exp
 
 
@@ -185,11 +186,14 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--device", help="override the config's device (cpu, cuda, cuda:0)")
     ap.add_argument("--output", help="override the config's output directory")
     ap.add_argument("--progress", action="store_true", help="print protocol phases to stderr")
+    ap.add_argument("--processes", default=None,
+                    help="CPU only: split the worlds over N processes ('auto': one per core; default: the "
+                         "config's 'processes', else auto)")
     ap.add_argument("--no-plots", action="store_true", help="do not write the per-world pictures")
     args = ap.parse_args(argv)
     try:
         cfg = load_config(args.config)
-        results, exp = run_config(cfg, device=args.device, progress=args.progress or None)
+        results, exp = run_config(cfg, device=args.device, progress=args.progress or None, processes=args.processes)
     except ConfigError as exc:
         print(f"warpdem experiment: configuration error: {exc}", file=sys.stderr)
         return 2

@@ -254,7 +254,7 @@ class Experiment:
         the solver's default). A run whose slots overflow is run again from the same fill with
         more slots (``overflow_retries`` times at most; recorded in ``timing["retries"]``).
     seed: fill RNG seed. fill_per_world: a different loose fill in every world (default: the
-        same fill everywhere).
+        same fill everywhere); world w's fill is seeded by (seed, first_fill_index + w).
     """
 
     name: ClassVar[str] = "experiment"
@@ -277,6 +277,7 @@ class Experiment:
     overflow_retries: int = 2
     seed: int = 0
     fill_per_world: bool = False
+    first_fill_index: int = 0
     wall_material: wd.Material = wd.PLEXIGLAS
 
     # ------------------------------------------------------------------ config
@@ -421,6 +422,29 @@ class Experiment:
         max_time = self.fill_settle_max_time + extra
         return min(t_fall, max_time), max_time
 
+    def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int) -> list[ExperimentResult]:
+        """:meth:`run` with the worlds split into ``nproc`` contiguous chunks, one process each."""
+        import concurrent.futures
+        import multiprocessing
+
+        wall0 = time.perf_counter()
+        bounds = np.linspace(0, len(parameter_sets), nproc + 1).round().astype(int)
+        chunks = [(int(a), parameter_sets[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+        ctx = multiprocessing.get_context("spawn")  # a clean interpreter: no inherited Warp/CUDA state
+        with concurrent.futures.ProcessPoolExecutor(max_workers=nproc, mp_context=ctx) as pool:
+            futures = [pool.submit(_run_chunk, self, sets, device, start) for start, sets in chunks]
+            parts = [f.result() for f in futures]
+        wall = round(time.perf_counter() - wall0, 3)
+        results = []
+        for (start, _), part in zip(chunks, parts):
+            for r in part:
+                r.world += start
+                r.timing = {**r.timing, "processes": nproc, "chunk_first_world": start,
+                            "chunk_wall_s": r.timing["wall_s"], "wall_s": wall, "worlds": len(parameter_sets),
+                            "note": "timing of this world's chunk (one process); wall_s: the whole run"}
+                results.append(r)
+        return results
+
     def _build_model(self, law: wd.ContactLaw, material: BulkMaterial, fills: list[FillResult],
                      sets: list[dict[str, float]], defaults: dict[str, float], t_motion: float, device: str | None,
                      max_contacts: int, max_neighbours: int | None):
@@ -446,9 +470,26 @@ class Experiment:
         return model, sim, dt, limits
 
     def run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None = None,
-            progress: bool = False) -> list[ExperimentResult]:
+            progress: bool = False, processes: int | str | None = 1) -> list[ExperimentResult]:
         """Run the experiment, one world per parameter set (contact parameters by the model's
-        names, e.g. ``mu_s_pp``); returns one :class:`ExperimentResult` per world, in order."""
+        names, e.g. ``mu_s_pp``); returns one :class:`ExperimentResult` per world, in order.
+
+        processes: on the CPU, split the worlds over this many processes ("auto": one per
+        usable core). Warp runs CPU kernels on one thread, so this is how a CPU run uses several
+        cores. Every world keeps its fill and parameters, but settling phases end when all worlds
+        of a model have settled, so a world's angle can differ (within the fill-to-fill scatter)
+        from the same world run in another batch. Ignored on CUDA, where one launch already runs
+        every world. Scripts that use processes > 1 need the ``if __name__ == "__main__":``
+        guard (worlds run in spawned interpreters)."""
+        nproc = cpu_processes(processes, device)
+        n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
+        if nproc > 1 and n_sets > 1:
+            return self._run_in_processes(list(parameter_sets), device, min(nproc, n_sets))
+        return self._run(parameter_sets, device, progress)
+
+    def _run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None,
+             progress: bool) -> list[ExperimentResult]:
+        """:meth:`run` in this process."""
         wall0 = time.perf_counter()
         law = wd.ContactLaw(rolling=self.rolling)
         sets = normalize_parameter_sets(parameter_sets, law.parameter_names)
@@ -456,7 +497,8 @@ class Experiment:
         nw = len(sets)
         material = self.bulk_material()
         if self.fill_per_world:
-            fills = [self.make_fill(material, np.random.default_rng([self.seed, w]), device) for w in range(nw)]
+            fills = [self.make_fill(material, np.random.default_rng([self.seed, self.first_fill_index + w]), device)
+                     for w in range(nw)]
         else:
             fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
         _, t_motion = self.fill_settle_times(fills)
@@ -530,3 +572,33 @@ class Experiment:
             results.append(r)
         ctx.log("done: " + ", ".join(f"w{r.world}={r.angle_deg:.2f}" if r.ok else f"w{r.world}=failed" for r in results))
         return results
+
+
+def cpu_processes(processes: int | str | None, device: str | None) -> int:
+    """Processes a CPU run uses: 1 on CUDA or when None; "auto" = usable cores."""
+    import os
+
+    import warp as wp
+
+    if processes is None:
+        return 1
+    dev = str(device) if device is not None else str(wp.get_preferred_device())
+    if processes == "auto":
+        n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    else:
+        try:
+            n = int(processes)
+        except (TypeError, ValueError):
+            raise ConfigError(f"processes must be a positive integer or 'auto', got {processes!r}") from None
+        if n < 1:
+            raise ConfigError(f"processes must be >= 1 or 'auto', got {processes}")
+    return 1 if str(dev).startswith("cuda") else n
+
+
+def _run_chunk(exp: Experiment, parameter_sets: list, device: str | None, first_world: int) -> list[ExperimentResult]:
+    """Worker of :meth:`Experiment._run_in_processes`: worlds ``first_world ...`` of a run."""
+    import warp as wp
+
+    wp.config.quiet = True
+    part = dataclasses.replace(exp, first_fill_index=exp.first_fill_index + first_world)
+    return part.run(parameter_sets, device=device, progress=False, processes=1)

@@ -112,8 +112,8 @@ class RotatingDrum(Experiment):
         volume = math.pi * (0.5 * self.diameter) ** 2 * self.length
         return {"mass": self.fill_fraction * volume * phi * material.particle.density}
 
-    def run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None = None,
-            progress: bool = False) -> list[ExperimentResult]:
+    def _run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None,
+             progress: bool) -> list[ExperimentResult]:
         """As :meth:`Experiment.run`; a parameter set may also give the world's ``rpm``."""
         law = wd.ContactLaw(rolling=self.rolling)
         sets = normalize_parameter_sets(parameter_sets, [*law.parameter_names, "rpm"])
@@ -123,7 +123,7 @@ class RotatingDrum(Experiment):
                 raise ConfigError(f"drum: parameter set {w}: rpm must be > 0, got {v}")
         self._world_rpm = rpms
         try:
-            results = super().run(sets, device=device, progress=progress)
+            results = super()._run(sets, device, progress)
         finally:
             self._world_rpm = None
         given = normalize_parameter_sets(parameter_sets, [*law.parameter_names, "rpm"])
