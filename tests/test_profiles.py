@@ -114,6 +114,10 @@ def test_revolution_snapshot_times():
     np.testing.assert_allclose(t[-1], [28.0, 29.0, 30.0])  # ends at 15 revolutions = 30 s
     t2 = revolution_snapshot_times(15.0, discard=2, record=4, t0=0.5)
     np.testing.assert_allclose(t2[0], [8.5, 10.5, 12.5])
+    t3 = revolution_snapshot_times(30.0, discard=1, record=2, frames=5)
+    np.testing.assert_allclose(t3, [[2.0, 2.5, 3.0, 3.5, 4.0], [4.0, 4.5, 5.0, 5.5, 6.0]])
+    with pytest.raises(ValueError, match="frames"):
+        revolution_snapshot_times(30.0, 1, 2, frames=1)
 
 
 def _drum_snapshot(angle, seed):

@@ -320,20 +320,23 @@ def bulk_density(
 # B. Rotating drum: dynamic angle of repose
 # --------------------------------------------------------------------------- #
 def revolution_snapshot_times(
-    rpm: float, discard: int, record: int, *, t0: float = 0.0
+    rpm: float, discard: int, record: int, *, t0: float = 0.0, frames: int = 3
 ) -> np.ndarray:
     """Snapshot times (s) for the drum: start, middle and end of each recorded
     revolution after ``discard`` revolutions (seed paper Section 2.1.2, spec B).
 
-    Returns shape ``(record, 3)``; rotation starts at ``t0`` (s), one
+    Returns shape ``(record, frames)``; rotation starts at ``t0`` (s), one
     revolution lasts ``60 / rpm`` s. The end of revolution k coincides with the
     start of revolution k+1, as in the paper's start-middle-end protocol.
+    ``frames`` > 3 spaces more frames evenly over each revolution, start and end
+    included (fewer particles -> noisier frames -> more frames for the same spread).
     """
-    if not rpm > 0 or discard < 0 or record < 1:
-        raise ValueError(f"need rpm > 0, discard >= 0, record >= 1 (got {rpm}, {discard}, {record})")
+    if not rpm > 0 or discard < 0 or record < 1 or frames < 2:
+        raise ValueError(f"need rpm > 0, discard >= 0, record >= 1, frames >= 2 "
+                         f"(got {rpm}, {discard}, {record}, {frames})")
     period = 60.0 / rpm
     k = np.arange(discard, discard + record, dtype=float)[:, None]
-    return t0 + period * (k + np.array([0.0, 0.5, 1.0])[None, :])
+    return t0 + period * (k + np.linspace(0.0, 1.0, int(frames))[None, :])
 
 
 @dataclass(frozen=True)
