@@ -216,7 +216,9 @@ def test_quick_drum_dynamic_angle_with_spread():
     (r,) = exp.run([HIGH], device="cpu")
     assert r.ok, r.error
     d = r.diagnostics
-    assert d["snapshots"] == 3 * 2 and len(d["snapshot_angles_deg"]) == 6
+    frames = exp.frames_per_revolution  # quick: 9 per revolution, start and end included
+    assert frames == 9 and d["snapshots"] == frames * 2 and len(d["snapshot_angles_deg"]) == frames * 2
+    assert np.diff(d["snapshot_times_s"][:frames]) == pytest.approx(np.full(frames - 1, 2.0 / (frames - 1)))
     assert 10.0 < r.angle_deg < 70.0
     assert math.isfinite(d["snapshot_std_deg"]) and d["snapshot_std_deg"] > 0
     # beta is atan of the mean slope, close to the mean of the snapshot angles
