@@ -212,3 +212,29 @@ def test_removed_bodies_leave_the_neighbour_lists():
     sim.run(2)
     assert sim.solver.nb_count.numpy()[probe] == 0
     assert np.allclose(sim.state.body_v.numpy()[probe], 0.0)  # no force from removed bodies
+
+
+def test_paused_world_holds_still_with_its_contacts():
+    """pause_worlds holds a world's bodies at rest with their contact history while the other
+    worlds move; resume_worlds releases it."""
+    b = wd.ModelBuilder(num_worlds=2)
+    b.add_material(wd.GRAVEL)
+    for w in range(2):
+        b.add_spheres([(0.0, 0.0, R - 1e-4), (0.0, 0.0, 3 * R + 0.01)], R, "gravel", world=w)
+    b.add_wall(geometry.plane((0.0, 0.0, 0.0), 0.2, 0.2), "gravel")
+    sim = wd.Simulation(b.finalize("cpu"), 1e-5)
+    sim.run(10)
+    sim.pause_worlds([1])
+    assert sim.solver.paused_worlds.tolist() == [False, True]
+    x0, n0 = sim.state.body_q.numpy().copy(), sim.state.contact_count.numpy().copy()
+    sim.run(200)
+    x1 = sim.state.body_q.numpy()
+    np.testing.assert_array_equal(x1[2:], x0[2:])                    # world 1 (bodies 2, 3) held
+    np.testing.assert_array_equal(sim.state.contact_count.numpy()[2:], n0[2:])
+    assert np.all(np.abs(x1[:2] - x0[:2]).max(axis=1) > 1e-6)        # world 0 falls / rebounds
+    assert np.all(sim.state.body_v.numpy()[2:] == 0)
+    sim.resume_worlds()
+    sim.run(50)
+    assert not np.array_equal(sim.state.body_q.numpy()[3], x0[3])    # released: falls again
+    with pytest.raises(wd.ConfigError, match="out of range"):
+        sim.pause_worlds([2])

@@ -287,3 +287,17 @@ def test_cpu_worlds_split_over_processes_keep_order_and_parameters():
     assert cpu_processes("auto", "cuda") == 1 and cpu_processes(3, "cpu") == 3
     with pytest.raises(wd.ConfigError, match="processes"):
         cpu_processes(0, "cpu")
+
+
+def test_world_result_does_not_depend_on_its_batch():
+    """Worlds sharing a fill are independent: a settled world is paused at rest while slower
+    worlds settle, so world 1 of a three-world batch ends exactly as the same world run alone
+    (even though the batch settles for longer)."""
+    kw = dict(max_time_after_lift=2.5)
+    sets = [{"mu_s_pp": 0.2}, {"mu_s_pp": 0.5}, {"mu_s_pp": 0.8}]
+    batch = make_experiment("baffle", "quick", **kw).run(sets, device="cpu")
+    alone = make_experiment("baffle", "quick", **kw).run(sets[1:2], device="cpu")[0]
+    assert batch[1].ok and alone.ok
+    assert batch[1].timing["phases_s"]["fill_settle"] > alone.timing["phases_s"]["fill_settle"]
+    assert batch[1].angle_deg == alone.angle_deg
+    np.testing.assert_array_equal(batch[1].particles[0], alone.particles[0])

@@ -192,9 +192,11 @@ def integrate_bodies(
     rot_out: wp.array(dtype=wp.quat),
     v_out: wp.array(dtype=wp.vec3),
     w_out: wp.array(dtype=wp.vec3),
+    world_paused: wp.array(dtype=int),
     bad: wp.array(dtype=int),
 ):
-    """Semi-implicit (symplectic) Euler step of rigid bodies.
+    """Semi-implicit (symplectic) Euler step of rigid bodies. Removed bodies and bodies of a
+    paused world keep their pose at rest.
 
     Translation: v' = v + (F/m + g) dt, x' = x + v' dt.
     Rotation (asymmetric bodies): the world angular momentum L = R I R^T w is advanced by the
@@ -207,7 +209,7 @@ def integrate_bodies(
     b = wp.tid()
     act = active_in[b]
     active_out[b] = act
-    if act == 0:
+    if act == 0 or world_paused[body_world[b]] != 0:
         q_out[b] = q_in[b]
         rot_out[b] = rot_in[b]
         v_out[b] = wp.vec3(0.0)
@@ -249,6 +251,16 @@ def integrate_bodies(
     rot_out[b] = r_new
     v_out[b] = v
     w_out[b] = w_new
+
+
+@wp.kernel
+def stop_paused_bodies(body_world: wp.array(dtype=int), world_paused: wp.array(dtype=int),
+                       v: wp.array(dtype=wp.vec3), w: wp.array(dtype=wp.vec3)):
+    """Zero the velocities of bodies in paused worlds (their contacts then carry no increments)."""
+    b = wp.tid()
+    if world_paused[body_world[b]] != 0:
+        v[b] = wp.vec3(0.0)
+        w[b] = wp.vec3(0.0)
 
 
 @wp.kernel
@@ -446,6 +458,7 @@ def contact_kernel(law: ContactLaw):
         wear_energy_t: wp.array(dtype=float),
         wear_impulse_n: wp.array(dtype=float),
         wear_impulse_t: wp.array(dtype=float),
+        world_paused: wp.array(dtype=int),
         overflow: wp.array(dtype=int),
     ):
         i = wp.tid()
@@ -453,6 +466,19 @@ def contact_kernel(law: ContactLaw):
         me = views[i]
         if me.r < 0.0:
             count_out[i] = 0
+            sphere_f[i] = wp.vec3(0.0)
+            sphere_t[i] = wp.vec3(0.0)
+            return
+        if world_paused[sphere_world[i]] != 0:
+            # a paused world is held at rest: its contact history is carried over unchanged
+            n_keep = count_in[i]
+            count_out[i] = n_keep
+            for s in range(n_keep):
+                partner_out[base + s] = partner_in[base + s]
+                spring_out[base + s] = spring_in[base + s]
+                if wp.static(roll_hist):
+                    roll_out[base + s] = roll_in[base + s]
+                wnormal_out[base + s] = wnormal_in[base + s]
             sphere_f[i] = wp.vec3(0.0)
             sphere_t[i] = wp.vec3(0.0)
             return

@@ -95,6 +95,7 @@ class DEMSolver:
         self.slot_tri = wp.zeros(n * k, dtype=int, device=d)
         self.overflow = wp.zeros(1, dtype=int, device=d)
         self.bad = wp.zeros(1, dtype=int, device=d)
+        self.world_paused = wp.zeros(max(model.num_worlds, 1), dtype=int, device=d)
         self.external_force = wp.zeros(model.num_bodies, dtype=wp.vec3, device=d)
         self.use_external_force = False
         self.wall_stats = WallStats(model)
@@ -150,7 +151,7 @@ class DEMSolver:
             self.external_force, int(self.use_external_force), wp.vec3(*m.gravity), dt,
             state_in.body_active, state_in.body_q, state_in.body_rot, state_in.body_v, state_in.body_w,
             state_out.body_active, state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
-            self.bad], device=d)
+            self.world_paused, self.bad], device=d)
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
 
 
@@ -177,6 +178,33 @@ class DEMSolver:
             device=m.device)
         wp.launch(kernels.finish_build, dim=1, inputs=[self.rebuild, self.list_builds], device=m.device)
 
+    def pause_worlds(self, state: State, worlds) -> None:
+        """Hold every body of ``worlds`` (indices or a boolean mask over worlds) at rest in its
+        current pose until :meth:`resume_worlds`: their velocities are zeroed and the integrator
+        leaves them in place, so a settled world waits unchanged while other worlds settle."""
+        flags = self.world_paused.numpy().copy()
+        sel = np.asarray(worlds)
+        if sel.dtype == bool:
+            if sel.shape != (self.model.num_worlds,):
+                raise ConfigError(f"pause_worlds: mask needs {self.model.num_worlds} entries, got {sel.shape}")
+            sel = np.flatnonzero(sel)
+        if sel.size and (sel.min() < 0 or sel.max() >= self.model.num_worlds):
+            raise ConfigError(f"pause_worlds: world index out of range 0..{self.model.num_worlds - 1}: {sel.tolist()}")
+        flags[sel] = 1
+        self.world_paused.assign(flags)
+        m = self.model
+        wp.launch(kernels.stop_paused_bodies, dim=m.num_bodies,
+                  inputs=[m.body_world, self.world_paused, state.body_v, state.body_w], device=m.device)
+
+    def resume_worlds(self) -> None:
+        """Release every paused world (it starts again from rest)."""
+        self.world_paused.zero_()
+
+    @property
+    def paused_worlds(self) -> np.ndarray:
+        """Boolean mask of the paused worlds."""
+        return self.world_paused.numpy()[: self.model.num_worlds] != 0
+
     def request_neighbour_rebuild(self) -> None:
         """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
         self.rebuild.fill_(1)
@@ -198,7 +226,7 @@ class DEMSolver:
             state_out.contact_count, state_out.contact_partner, state_out.contact_spring, state_out.contact_roll,
             state_out.contact_wnormal,
             self.slot_point, self.slot_depth, self.slot_tri, self.sphere_f, self.sphere_t,
-            ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.overflow], device=d)
+            ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.world_paused, self.overflow], device=d)
 
     # ---------------------------------------------------------------- checks
     def check(self) -> None:
@@ -338,6 +366,13 @@ class Simulation:
                   inputs=[self.state.body_q, wp.vec3(*lower), wp.vec3(*upper), self.state.body_active, removed],
                   device=m.device)
         return int(removed.numpy()[0])
+
+    def pause_worlds(self, worlds) -> None:
+        """Hold the bodies of ``worlds`` at rest (see :meth:`DEMSolver.pause_worlds`)."""
+        self.solver.pause_worlds(self.state, worlds)
+
+    def resume_worlds(self) -> None:
+        self.solver.resume_worlds()
 
     def settle(self, ke_per_particle: float = 1.0e-6, max_time: float = 1.5, check_interval: float = 0.01,
                min_time: float = 0.0) -> float:

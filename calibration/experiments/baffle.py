@@ -110,7 +110,7 @@ class BaffleBox(Experiment):
         box = self.remove_box()
         out: list[dict[str, Any]] = [dict() for _ in range(nw)]
         # Fill: settle under gravity until KE/particle < 1e-6 J or 1.5 s (spec A "Fill")
-        t_min, t_max = self.fill_settle_times(ctx.fills)
+        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
         ctx.settle("fill_settle", t_max, t_min, box)
         # level the surface if a levelling height is given (spec A "Fill")
         if self.level_height is not None:

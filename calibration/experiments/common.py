@@ -422,6 +422,12 @@ class Experiment:
         max_time = self.fill_settle_max_time + extra
         return min(t_fall, max_time), max_time
 
+    def fill_settle_times_per_world(self, fills: list[FillResult], num_worlds: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`fill_settle_times` of each world's own fill (one fill shared, or one per world),
+        so that a world's settling does not depend on the other worlds of its batch."""
+        per = [self.fill_settle_times([fills[w if len(fills) > 1 else 0]]) for w in range(num_worlds)]
+        return np.array([p[0] for p in per]), np.array([p[1] for p in per])
+
     def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int) -> list[ExperimentResult]:
         """:meth:`run` with the worlds split into ``nproc`` contiguous chunks, one process each."""
         import concurrent.futures

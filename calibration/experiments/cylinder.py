@@ -100,7 +100,7 @@ class HollowCylinder(Experiment):
         nw = ctx.num_worlds
         box = self.remove_box()
         # Fill: settled and levelled as in A (spec C "Fill")
-        t_min, t_max = self.fill_settle_times(ctx.fills)
+        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
         ctx.settle("fill_settle", t_max, t_min, box)
         if self.level_height is not None:
             removed = level(ctx.sim, self.level_height)

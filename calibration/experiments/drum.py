@@ -164,7 +164,7 @@ class RotatingDrum(Experiment):
         nw = ctx.num_worlds
         box = self.remove_box()
         # Fill: settled at rest (spec B "Fill")
-        t_min, t_max = self.fill_settle_times(ctx.fills)
+        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
         ctx.settle("fill_settle", t_max, t_min, box)
         # rotate; snapshots at start/middle/end of each recorded revolution (spec B "Protocol", "Measurement")
         ctx.jump_clock(t_motion)
