@@ -482,10 +482,10 @@ class Experiment:
 
         processes: on the CPU, split the worlds over this many processes ("auto": one per
         usable core). Warp runs CPU kernels on one thread, so this is how a CPU run uses several
-        cores. Every world keeps its fill and parameters, but settling phases end when all worlds
-        of a model have settled, so a world's angle can differ (within the fill-to-fill scatter)
-        from the same world run in another batch. Ignored on CUDA, where one launch already runs
-        every world. Scripts that use processes > 1 need the ``if __name__ == "__main__":``
+        cores. Every world keeps its fill and parameters; worlds sharing one fill give the same
+        results in any split (settled worlds wait at rest); with a fill per world the time step
+        and wall height follow each chunk's fills, so results can differ within the fill scatter.
+        Ignored on CUDA, where one launch already runs every world. Scripts that use processes > 1 need the ``if __name__ == "__main__":``
         guard (worlds run in spawned interpreters)."""
         nproc = cpu_processes(processes, device)
         n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
