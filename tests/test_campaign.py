@@ -151,8 +151,9 @@ def test_gpu_config_recovers_dem_targets(tmp_path):
 @pytest.mark.slow
 def test_quick_config_recovers_dem_targets(tmp_path):
     """Issue 5 end to end on the CPU: the README's main job (quick_calibration.yaml: 12 samples x
-    2 fills, one process per core, 6-7 min on 2 cores) matches DEM-produced targets within
-    1.5 deg at the compromise, and the true parameters lie in the acceptable set."""
+    2 fills, one process per core, 6-8 min on 2 cores) should match DEM-produced targets within
+    1.5 deg at the compromise, with the true parameters in the acceptable set. Known to fail with the
+    current code (dynamic angle 2.9 deg off, benchmarks/RESULTS.md): issue 5 stays open on this."""
     cfg = cp.load_config(Path(__file__).parents[1] / "calibration" / "configs" / "quick_calibration.yaml")
     cfg.device = "cpu"
     res = cp.Campaign(cfg, tmp_path, verbose=False).run(progress=False)
