@@ -75,7 +75,7 @@ def settle_and_time(sim: wd.Simulation, device: str, settle_time: float, warmup:
     ``warmup`` steps, time ``steps`` steps. Returns (settling sim time, settling wall s, timed wall s)."""
     t0 = time.perf_counter()
     settle_sim_time = sim.settle(ke_per_particle=1e-6, max_time=settle_time, check_interval=0.05,
-                                 min_time=min(min_time, settle_time))
+                                 min_time=min(min_time, settle_time)).time
     t_settle = time.perf_counter() - t0
     sim.run(warmup)
     wp.synchronize_device(device)

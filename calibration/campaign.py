@@ -19,7 +19,6 @@ The configuration (YAML/JSON) is documented in ``calibration/configs/quick_calib
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from dataclasses import dataclass, field

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from warpdem import ConfigError
+from warpdem import ConfigError, SettleReport
 from warpdem.builder import random_quaternions
 
 from .materials import ParticleSample
@@ -408,62 +408,16 @@ def level(sim, height: float, world: int | None = None) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- settling
-@dataclass(frozen=True)
-class SettleReport:
-    """Outcome of :func:`settle`: simulated time spent [s], whether every world met the
-    criterion, final kinetic energy per active particle per world [J], bodies removed."""
-
-    time: float
-    settled: bool
-    ke_per_particle: np.ndarray
-    removed: int
 
 
 def settle(sim, ke_per_particle: float = 1.0e-6, max_time: float | np.ndarray = 1.5,
            min_time: float | np.ndarray = 0.0, check_interval: float = 0.02,
            remove_box: tuple | None = None) -> SettleReport:
-    """Run until the mean kinetic energy per active particle of every world is below
-    ``ke_per_particle`` [J] (spec A/C "settled" criterion) after ``min_time``, or ``max_time``
-    [s] passed (both scalars or one value per world). Bodies leaving ``remove_box`` =
-    (lower, upper) [m] are removed at each check.
-
-    Worlds are independent: a world that meets the criterion (or reaches its ``max_time``) is
-    paused at rest (:meth:`warpdem.Simulation.pause_worlds`) while the others go on, and all are
-    released at the end. A world's settled state therefore depends only on its own fill and
-    parameters, not on the other worlds of its batch."""
-    nw = sim.model.num_worlds
-    max_w = np.broadcast_to(np.asarray(max_time, dtype=float), (nw,))
-    min_w = np.broadcast_to(np.asarray(min_time, dtype=float), (nw,))
-    if np.any(max_w < 0) or np.any(min_w < 0):
-        raise ConfigError(f"settle: times must be >= 0, got min {min_time}, max {max_time}")
-    dt = sim.dt
-    chunk = max(1, int(round(check_interval / dt)))
-    n_max = np.round(max_w / dt).astype(int)
-    done, removed = 0, 0
-    worlds = sim.model.host["body_world"]
-    ke_report = np.zeros(nw)
-    paused = np.zeros(nw, dtype=bool)
-    met = np.zeros(nw, dtype=bool)
-    try:
-        while not paused.all():
-            k = int(min(chunk, n_max[~paused].max() - done))
-            if k > 0:
-                sim.run(k, check_every=k)
-                done += k
-                if remove_box is not None:
-                    removed += sim.remove_outside(*remove_box)
-            active = np.bincount(worlds, weights=sim.state.body_active.numpy(), minlength=nw)
-            ke = sim.kinetic_energy() / np.maximum(active, 1)
-            ke_report[~paused] = ke[~paused]
-            now_met = ~paused & (done * dt >= min_w - 1e-12) & (ke < ke_per_particle)
-            met |= now_met
-            stop = now_met | (~paused & (done >= n_max))
-            if stop.any():
-                paused |= stop
-                sim.pause_worlds(paused)
-    finally:
-        sim.resume_worlds()
-    return SettleReport(done * dt, bool(met.all()), ke_report, removed)
+    """Spec A/C "settled" criterion: mean kinetic energy per active particle of every world below
+    ``ke_per_particle`` [J] after ``min_time``, or ``max_time`` [s] passed (per world possible);
+    bodies leaving ``remove_box`` are removed. Each world is paused once settled, see
+    :meth:`warpdem.Simulation.settle`."""
+    return sim.settle(ke_per_particle, max_time, check_interval, min_time, remove_box)
 
 
 def run_for(sim, duration: float, remove_box: tuple | None = None, remove_interval: float = 0.05) -> tuple[int, int]:

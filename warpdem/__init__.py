@@ -4,13 +4,13 @@ from .contact import ContactLaw, ParameterSpec, SubModel, register
 from .errors import ConfigError, ContactOverflowError, OverlapError, StabilityError, WarpDEMError
 from .materials import GRAVEL, PLEXIGLAS, STEEL, Material
 from .model import Model, State, Wall, WallMotion
-from .solver import DEMSolver, Simulation, WallStats
+from .solver import DEMSolver, SettleReport, Simulation, WallStats
 from .timestep import check_time_step, hertz_contact_time, hertz_max_overlap, rayleigh_time, time_step_limits
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "ModelBuilder", "Model", "State", "Wall", "WallMotion", "DEMSolver", "Simulation", "WallStats",
+    "ModelBuilder", "Model", "State", "Wall", "WallMotion", "DEMSolver", "SettleReport", "Simulation", "WallStats",
     "ContactLaw", "ParameterSpec", "SubModel", "register", "Material", "GRAVEL", "PLEXIGLAS", "STEEL",
     "ConfigError", "ContactOverflowError", "OverlapError", "StabilityError", "WarpDEMError",
     "check_time_step", "hertz_contact_time", "hertz_max_overlap", "rayleigh_time", "time_step_limits",

@@ -1,7 +1,7 @@
 """DEM solver (``step(state_in, state_out, dt)``) and a thin ``Simulation`` driver."""
 from __future__ import annotations
 
-import math
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -253,6 +253,17 @@ class DEMSolver:
                 f"contacts, or the start had a huge overlap (limit {self.limits.limit:.3g} s)")
 
 
+@dataclass(frozen=True)
+class SettleReport:
+    """Outcome of :meth:`Simulation.settle`: simulated time spent [s], whether every world met
+    the criterion, kinetic energy per active body per world when it stopped [J], bodies removed."""
+
+    time: float
+    settled: bool
+    ke_per_particle: np.ndarray
+    removed: int
+
+
 class Simulation:
     """Owns two States and a solver; runs many steps with periodic checks.
 
@@ -374,17 +385,46 @@ class Simulation:
     def resume_worlds(self) -> None:
         self.solver.resume_worlds()
 
-    def settle(self, ke_per_particle: float = 1.0e-6, max_time: float = 1.5, check_interval: float = 0.01,
-               min_time: float = 0.0) -> float:
+    def settle(self, ke_per_particle: float = 1.0e-6, max_time: float | np.ndarray = 1.5,
+               check_interval: float = 0.01, min_time: float | np.ndarray = 0.0,
+               remove_box: tuple | None = None) -> "SettleReport":
         """Run until the mean kinetic energy per active body of every world is below
-        ``ke_per_particle`` [J] or ``max_time`` [s] of simulated time passed; returns the time spent."""
-        t0 = self.time
-        n = max(1, int(round(check_interval / self.dt)))
-        while True:
-            self.run(n, check_every=n)
-            elapsed = self.time - t0
-            active = np.bincount(self.model.host["body_world"], weights=self.state.body_active.numpy(),
-                                 minlength=self.model.num_worlds)
-            ke = self.kinetic_energy() / np.maximum(active, 1)
-            if (elapsed >= min_time and np.all(ke < ke_per_particle)) or elapsed >= max_time:
-                return elapsed
+        ``ke_per_particle`` [J] after ``min_time``, or ``max_time`` [s] passed (scalars or one
+        value per world). Bodies leaving ``remove_box`` = (lower, upper) [m] are removed at each
+        check (every ``check_interval`` s).
+
+        Worlds are independent: a world that meets the criterion (or reaches its ``max_time``)
+        is paused at rest (:meth:`pause_worlds`) while the others go on, and all are released at
+        the end, so a world's settled state does not depend on the other worlds of its batch."""
+        nw = self.model.num_worlds
+        max_w = np.broadcast_to(np.asarray(max_time, dtype=float), (nw,))
+        min_w = np.broadcast_to(np.asarray(min_time, dtype=float), (nw,))
+        if np.any(max_w < 0) or np.any(min_w < 0):
+            raise ConfigError(f"settle: times must be >= 0, got min {min_time}, max {max_time}")
+        chunk = max(1, int(round(check_interval / self.dt)))
+        n_max = np.round(max_w / self.dt).astype(int)
+        done, removed = 0, 0
+        worlds = self.model.host["body_world"]
+        ke_report = np.zeros(nw)
+        paused = np.zeros(nw, dtype=bool)
+        met = np.zeros(nw, dtype=bool)
+        try:
+            while not paused.all():
+                k = int(min(chunk, n_max[~paused].max() - done))
+                if k > 0:
+                    self.run(k, check_every=k)
+                    done += k
+                    if remove_box is not None:
+                        removed += self.remove_outside(*remove_box)
+                active = np.bincount(worlds, weights=self.state.body_active.numpy(), minlength=nw)
+                ke = self.kinetic_energy() / np.maximum(active, 1)
+                ke_report[~paused] = ke[~paused]
+                now_met = ~paused & (done * self.dt >= min_w - 1e-12) & (ke < ke_per_particle)
+                met |= now_met
+                stop = now_met | (~paused & (done >= n_max))
+                if stop.any():
+                    paused |= stop
+                    self.pause_worlds(paused)
+        finally:
+            self.resume_worlds()
+        return SettleReport(done * self.dt, bool(met.all()), ke_report, removed)

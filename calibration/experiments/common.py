@@ -485,8 +485,8 @@ class Experiment:
         cores. Every world keeps its fill and parameters; worlds sharing one fill give the same
         results in any split (settled worlds wait at rest); with a fill per world the time step
         and wall height follow each chunk's fills, so results can differ within the fill scatter.
-        Ignored on CUDA, where one launch already runs every world. Scripts that use processes > 1 need the ``if __name__ == "__main__":``
-        guard (worlds run in spawned interpreters)."""
+        Ignored on CUDA, where one launch already runs every world. Scripts that use
+        processes > 1 need the ``if __name__ == "__main__":`` guard (spawned interpreters)."""
         nproc = cpu_processes(processes, device)
         n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
         if nproc > 1 and n_sets > 1:

@@ -14,11 +14,11 @@ from warpdem.geometry import cylinder_shell
 from ..filling import VerticalCylinder, body_tops, level
 from ..materials import BulkMaterial
 from ..measurement import CylinderPileResult, cylinder_pile_angle
-
-QUICK_CYLINDER_MATERIAL = BulkMaterial.spheres(0.014, 0.018, name="quick spheres d=14-18 mm")
 from .common import Experiment, RunContext, fit_to_dict, rectangle
 
 __all__ = ["HollowCylinder"]
+
+QUICK_CYLINDER_MATERIAL = BulkMaterial.spheres(0.014, 0.018, name="quick spheres d=14-18 mm")
 
 
 @dataclass
