@@ -6,8 +6,9 @@ noise) and measures it with the OpenCV pipeline (every edge column, the photogra
 compares with the spec's particle profile (highest particle top per bin). Prints one JSON line
 per world and a summary line.
 
-    python benchmarks/image_vs_profile.py --scale quick --worlds 6                 # CPU, 24-30 mm spheres
+    python benchmarks/image_vs_profile.py --scale quick --worlds 16                # CPU, 24-30 mm spheres, 28 kg
     python benchmarks/image_vs_profile.py --scale paper --material spheres --worlds 16 --device cuda
+    python benchmarks/image_vs_profile.py --scale paper --material fine-spheres --worlds 8 --device cuda
 """
 from __future__ import annotations
 
@@ -26,7 +27,8 @@ from calibration.experiments import make_experiment  # noqa: E402
 from calibration.materials import BulkMaterial  # noqa: E402
 from calibration.measurement import MeasurementError, measure_image, render_side_view  # noqa: E402
 
-MATERIALS = {"default": None, "spheres": lambda: BulkMaterial.spheres(0.016, 0.020)}
+MATERIALS = {"default": None, "spheres": lambda: BulkMaterial.spheres(0.016, 0.020),
+             "fine-spheres": lambda: BulkMaterial.spheres(0.008, 0.010)}
 
 
 def main(argv=None) -> list[dict]:
@@ -37,6 +39,8 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--device", default=None)
     ap.add_argument("--scale-px-per-mm", type=float, default=2.0)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--processes", default="auto", help="CPU: worlds split over this many processes")
+    ap.add_argument("--save-dir", default=None, help="write each pile (positions, radii, h_fill) as .npz here")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     extra = {} if MATERIALS[args.material] is None else {"material": MATERIALS[args.material]()}
@@ -45,7 +49,8 @@ def main(argv=None) -> list[dict]:
     sets = [{"mu_s_pp": float(rng.uniform(0.3, 0.7)), "mu_s_pw": float(rng.uniform(0.3, 0.7)),
              "mu_r_pp": 0.15, "mu_r_pw": 0.15} for _ in range(args.worlds)]
     t0 = time.perf_counter()
-    results = exp.run(sets, device=args.device)
+    results = exp.run(sets, device=args.device,
+                      processes=args.processes if args.processes == "auto" else int(args.processes))
     wall = time.perf_counter() - t0
     lines, diffs = [], []
     for r in results:
@@ -54,6 +59,10 @@ def main(argv=None) -> list[dict]:
         if r.ok:
             pos, rad = r.particles
             h_fill = r.diagnostics["h_fill_m"]
+            if args.save_dir:
+                Path(args.save_dir).mkdir(parents=True, exist_ok=True)
+                np.savez_compressed(Path(args.save_dir) / f"pile_{args.scale}_{args.material}_{r.world:03d}.npz",
+                                    positions=pos, radii=rad, h_fill=h_fill, profile_deg=r.angle_deg)
             view = render_side_view(pos, rad, slab=exp.measure_y, scale_px_per_mm=args.scale_px_per_mm,
                                     extent_m=(-0.02, exp.floor_length + 0.02, -0.02, exp.box_height),
                                     noise_std=6.0, rng=r.world)

@@ -38,7 +38,12 @@ from .experiments.common import _jsonable, cpu_processes
 from .measurement.records import load_measurements
 
 TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
-            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity"}
+            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills"}
+FILL_MODES = ("independent", "shared")
+# first loose-fill index of each kind of DEM run when fills are independent: design sample i uses
+# fills i*replicates ..., so the target, the confirmation rounds and the validation never reuse a
+# fill of the design or of each other (no accidental common random numbers)
+TARGET_FILLS, CONFIRMATION_FILLS, VALIDATION_FILLS = 1_000_000, 2_000_000, 3_000_000
 RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target", "replicates"}
 
 
@@ -72,6 +77,7 @@ class CampaignConfig:
     batch_worlds: int = 8
     device: str | None = None
     processes: int | str = "auto"
+    fills: str = "independent"  # "independent": a new loose fill for every world; "shared": one fill per batch
     output: str = "results/calibration"
     optimisation: dict[str, Any] = field(default_factory=dict)
     confirmation_runs: int = 1
@@ -142,6 +148,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         fixed=fixed, rolling=law.rolling, samples=int(design.get("samples", 24)),
         held_out=int(design.get("held_out", 6)), seed=int(design.get("seed", 0)),
         batch_worlds=int(raw.get("batch_worlds", 8)), device=raw.get("device"), processes=raw.get("processes", "auto"),
+        fills=str(raw.get("fills", "independent")),
         output=str(raw.get("output", "results/calibration")), optimisation=dict(raw.get("optimisation") or {}),
         confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
         refine_rounds=int((raw.get("confirmation") or {}).get("refine_rounds", 0)),
@@ -154,6 +161,8 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
                           f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
     if cfg.batch_worlds < 1:
         raise ConfigError(f"{source}: batch_worlds must be >= 1")
+    if cfg.fills not in FILL_MODES:
+        raise ConfigError(f"{source}: fills must be one of {list(FILL_MODES)}, got {cfg.fills!r}")
     try:
         cpu_processes(cfg.processes, "cpu")
     except ConfigError as exc:
@@ -163,16 +172,23 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
 
 # ----------------------------------------------------------------------------- DEM runs
 def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: CampaignConfig,
-                 progress: bool = False) -> list[dict[str, Any]]:
+                 progress: bool = False, first_fill: int = 0) -> list[dict[str, Any]]:
     """Run one experiment with one world per (parameter set, replicate); returns one record per
     parameter set with the replicate mean (``angle_deg``), the replicate angles and their spread.
 
-    Replicates use a different loose fill in every world (``fill_per_world``): at small particle
-    counts the angle is a rough function of the parameters, and the replicate spread is the
+    With ``cfg.fills == "independent"`` every world gets its own loose fill, numbered from
+    ``first_fill`` (world k uses fill ``first_fill + k``), so that the design, the target, the
+    confirmation and the validation runs never share a fill. With ``"shared"`` one fill serves a
+    whole batch (replicates still get a fill each, numbered from 0), a common-random-numbers
+    design: the surrogate sees a smoother response, biased by that one fill. At small particle
+    counts the angle is a rough function of the parameters, and the fill-to-fill spread is the
     noise floor any calibration against this experiment can reach."""
     r = resp.replicates
     settings = dict(resp.settings)
-    if r > 1:
+    if cfg.fills == "independent":
+        settings["fill_per_world"] = True
+        settings["first_fill_index"] = int(first_fill)
+    elif r > 1:
         settings["fill_per_world"] = True
     exp = make_experiment(resp.experiment, resp.scale, rolling=cfg.rolling, **settings)
     sets = [{**cfg.fixed, **p} for p in parameter_sets for _ in range(r)]
@@ -217,12 +233,22 @@ def resolve_target(resp: Response, cfg: CampaignConfig, log) -> None:
         resp.target_source = f"{path}: {t['experiment']}/{t['condition']} (n = {stats.n})"
         return
     if "dem_at" in t:
+        bad = set(t) - {"dem_at", "runs"}
+        if bad:
+            raise ConfigError(f"response '{resp.name}': target: unknown key(s) {sorted(bad)}; valid: ['dem_at', 'runs']")
         truth = {k: float(v) for k, v in t["dem_at"].items()}
-        log(f"target '{resp.name}': DEM run at known parameters {truth}")
-        rec = run_response(resp, [truth], cfg)[0]
-        if rec["status"] != "ok":
-            raise ConfigError(f"response '{resp.name}': the DEM run producing the target failed: {rec['error']}")
-        resp.target_deg, resp.target_source = float(rec["angle_deg"]), f"DEM at {truth}"
+        runs = int(t.get("runs", 1))
+        if runs < 1:
+            raise ConfigError(f"response '{resp.name}': target runs must be >= 1, got {runs}")
+        log(f"target '{resp.name}': DEM at known parameters {truth}, {runs} run(s) x {resp.replicates} fill(s)")
+        recs = run_response(resp, [truth] * runs, cfg, first_fill=TARGET_FILLS)
+        angles = [a for rec in recs if rec["status"] == "ok" for a in rec["replicate_angles_deg"]]
+        if len(angles) < runs * resp.replicates:
+            errs = "; ".join(str(rec["error"]) for rec in recs if rec["error"])
+            raise ConfigError(f"response '{resp.name}': a DEM run producing the target failed: {errs}")
+        resp.target_deg = float(np.mean(angles))
+        resp.target_std_deg = float(np.std(angles, ddof=1)) if len(angles) > 1 else None
+        resp.target_source = f"DEM at {truth}, mean of {len(angles)} loose fill(s)"
         return
     raise ConfigError(f"response '{resp.name}': target mapping needs 'file' or 'dem_at', got keys {sorted(t)}")
 
@@ -291,7 +317,7 @@ class Campaign:
             for start in range(0, len(todo), self.cfg.batch_worlds):
                 batch = todo[start:start + self.cfg.batch_worlds]
                 sets = [dict(zip(names, map(float, X[i]))) for i in batch]
-                records = run_response(resp, sets, self.cfg)
+                records = run_response(resp, sets, self.cfg, first_fill=batch[0] * resp.replicates)
                 with open(self.samples_path, "a") as fh:
                     for i, p, rec in zip(batch, sets, records):
                         rec = dict(index=i, response=resp.name, parameters=p, **rec)
@@ -364,11 +390,14 @@ class Campaign:
             x_best = dict(zip(pnames, map(float, cal.compromise_x)))
             conf = {}
             for resp in cfg.responses:
-                recs = run_response(resp, [x_best] * cfg.confirmation_runs, cfg)
-                angles = [r["angle_deg"] for r in recs if r["status"] == "ok"]
+                recs = run_response(resp, [x_best] * cfg.confirmation_runs, cfg,
+                                    first_fill=CONFIRMATION_FILLS + 10_000 * rnd)
+                angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
                 dem = float(np.mean(angles)) if angles else None
                 conf[resp.name] = dict(
-                    dem_deg=dem, dem_runs=angles, target_deg=resp.target_deg,
+                    dem_deg=dem, dem_fills=angles,
+                    dem_std_deg=float(np.std(angles, ddof=1)) if len(angles) > 1 else None,
+                    target_deg=resp.target_deg, target_std_deg=resp.target_std_deg,
                     surrogate_deg=float(sur.predict(cal.compromise_x[None])[0][rnames.index(resp.name)]),
                     relative_error_pct=None if dem is None else abs(dem - resp.target_deg) / resp.target_deg * 100,
                     abs_error_deg=None if dem is None else abs(dem - resp.target_deg),
@@ -396,8 +425,8 @@ class Campaign:
         plot_sensitivity(sob, path=str(self.out / "sensitivity.png"))
         if cfg.validation is not None:
             v = cfg.validation
-            recs = run_response(v, [rounds[-1]["parameters"]] * cfg.confirmation_runs, cfg)
-            angles = [r["angle_deg"] for r in recs if r["status"] == "ok"]
+            recs = run_response(v, [rounds[-1]["parameters"]], cfg, first_fill=VALIDATION_FILLS)
+            angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
             dem = float(np.mean(angles)) if angles else None
             res["validation"] = dict(experiment=v.experiment, scale=v.scale, dem_deg=dem, measured_deg=v.target_deg,
                                      measured_std_deg=v.target_std_deg,

@@ -33,18 +33,29 @@ def fake_angle(experiment, p):
     return 20 + 8 * a + 40 * b - 10 * b * b
 
 
+class Calls(list):
+    """(response, number of parameter sets) per DEM call; ``fills`` holds the loose-fill indices
+    each call would use (first_fill + world)."""
+
+    def __init__(self):
+        super().__init__()
+        self.fills: list[tuple[str, range]] = []
+
+
 @pytest.fixture
 def fake_dem(monkeypatch):
-    calls = []
+    calls = Calls()
 
-    def run_response(resp, parameter_sets, cfg, progress=False):
+    def run_response(resp, parameter_sets, cfg, progress=False, first_fill=0):
         calls.append((resp.name, len(parameter_sets)))
+        calls.fills.append((resp.name, range(first_fill, first_fill + len(parameter_sets) * resp.replicates)))
         out = []
         for p in parameter_sets:
             if p["mu_s_pp"] > 0.78 and resp.name == "beta":  # an unstable run: must be recorded
                 out.append(dict(status="failed", error="StabilityError: test", angle_deg=None))
             else:
-                out.append(dict(status="ok", error=None, angle_deg=fake_angle(resp.experiment, p)))
+                a = fake_angle(resp.experiment, p)
+                out.append(dict(status="ok", error=None, angle_deg=a, replicate_angles_deg=[a] * resp.replicates))
         return out
 
     monkeypatch.setattr(cp, "run_response", run_response)
@@ -60,6 +71,26 @@ def test_config_errors_name_the_key(tmp_path):
         cp.parse_config({**BASE, "responses": [{"name": "a", "experiment": "baffle", "targt": 3}]})
     with pytest.raises(ConfigError, match="not found"):
         cp.load_config(tmp_path / "missing.yaml")
+    with pytest.raises(ConfigError, match="fills must be one of"):
+        cp.parse_config({**BASE, "fills": "same"})
+
+
+def test_target_design_confirmation_and_validation_never_share_a_fill(tmp_path, fake_dem):
+    """With independent fills (the default) the DEM target is the mean of its own fills, and no
+    fill index is used twice across target, design, confirmation rounds and validation."""
+    raw = {**BASE, "responses": [
+        {**BASE["responses"][0], "replicates": 2, "target": {"dem_at": {"mu_s_pp": 0.5, "mu_s_pw": 0.3}, "runs": 3}},
+        BASE["responses"][1]],
+        "validation": {"name": "gamma", "experiment": "cylinder", "target": 30.0}}
+    cfg = cp.parse_config(raw)
+    res = cp.Campaign(cfg, tmp_path, verbose=False).run(progress=False)
+    assert res["targets"]["alpha"]["source"].endswith("mean of 6 loose fill(s)")
+    for name in ("alpha", "beta", "gamma"):
+        used = [f for resp, fills in fake_dem.fills if resp == name for f in fills]
+        assert len(used) == len(set(used)), name
+    with pytest.raises(ConfigError, match="target: unknown key"):
+        cp.resolve_target(cp._response({"name": "a", "experiment": "baffle",
+                                        "target": {"dem_at": {"mu_s_pp": 0.4}, "run": 2}}, "t"), cfg, print)
 
 
 def test_campaign_recovers_known_parameters_and_resumes(tmp_path, fake_dem):

@@ -1,5 +1,10 @@
 """Issue 4: on a pile simulated by the DEM, the camera-view measurement (render + OpenCV
-pipeline) and the particle-profile measurement (spec A) give the same angle within 1 degree."""
+pipeline) and the particle-profile measurement (spec A) give the same angle within 1 degree.
+
+The two are different estimators of one slope (every pixel column of the silhouette against the
+highest particle top per bin), so they agree to the extent the slope is resolved by particles:
+the quick preset's 28 kg fill spans ~7 diameters (16/16 piles within 1 deg, mean |diff| 0.4 deg;
+benchmarks/RESULTS.md), 8-10 mm spheres at paper scale 8/8 within 0.5 deg (GPU benchmark)."""
 import numpy as np
 import pytest
 
@@ -7,10 +12,6 @@ from calibration.experiments import make_experiment
 from calibration.measurement import baffle_static_angle, measure_image, render_side_view
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "issue 4, open: the image edge (every pixel column) and the profile (highest particle top per bin) "
-    "agreed within 1 deg on this pile before settled worlds were paused and differ by 2.0 deg now; on 16 "
-    "paper-scale piles only 4 agree within 1 deg (benchmarks/image_vs_profile.py, RESULTS.md)"))
 def test_simulated_baffle_pile_image_angle_matches_profile_angle():
     exp = make_experiment("baffle", "quick")
     res = exp.run([{"mu_s_pp": 0.6, "mu_s_pw": 0.5, "mu_r_pp": 0.15, "mu_r_pw": 0.15}], device="cpu")[0]

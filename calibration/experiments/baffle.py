@@ -34,15 +34,20 @@ class BaffleBox(Experiment):
     Measurement: ``measure_y`` slab, ``bin_width`` bins, fit band ``band`` x h_fill,
     ``min_bins``; bulk density in the box shrunk by ``density_margin`` (x, y, floor) and
     ``density_top_margin`` below h.
-    Scale "quick": spheres d = 24-30 mm, same box and mass, baffle lifted at 0.2 m/s to
-    0.30 m, at most 4 s after the lift started.
+    Scale "quick": spheres d = 24-30 mm, same box, 28 kg (fill about 0.29 m high instead of
+    0.17 m), baffle lifted at 0.2 m/s to 0.30 m, at most 4 s after the lift started, 25 mm bins.
+    The taller fill is deliberate: inside the box the slope runs from the crest down to the
+    height of the heap outside the baffle, only about 4 particle diameters of 24-30 mm spheres
+    at 16 kg, so one pile's angle (and the camera view of it) scattered by 3.4 deg between loose
+    fills; at 28 kg the slope spans ~7 diameters and the scatter is 1.6 deg, and the image and
+    profile angles of a pile agree within 1 deg (benchmarks/RESULTS.md, "quick baffle fill").
     """
 
     name: ClassVar[str] = "baffle"
     angle_name: ClassVar[str] = "alpha_AoR_S"
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
         "paper": {},
-        "quick": {"material": QUICK_MATERIAL, "lift_speed": 0.2, "lift_to": 0.30, "max_time_after_lift": 4.0,
+        "quick": {"material": QUICK_MATERIAL, "fill_mass": 28.0, "lift_speed": 0.2, "lift_to": 0.30, "max_time_after_lift": 4.0,
                   "bin_width": 0.025},
     }
 
