@@ -134,6 +134,8 @@ def test_unknown_settings_and_parameters_raise_clear_errors():
         make_experiment("baffle", "quick", baffle_hieght=0.5)
     with pytest.raises(wd.ConfigError, match="unknown scale"):
         make_experiment("drum", "huge")
+    with pytest.raises(wd.ConfigError, match="max_skipped_snapshots must be a finite number >= 0"):
+        make_experiment("drum", "quick", max_skipped_snapshots=-1)
     with pytest.raises(wd.ConfigError, match="unknown experiment"):
         make_experiment("chute")
     with pytest.raises(wd.ConfigError, match=r"unknown key\(s\) \['worlds'\]"):

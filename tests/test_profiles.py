@@ -160,6 +160,22 @@ def test_drum_dynamic_angle_crop_and_errors():
         drum_dynamic_angle([])
 
 
+def test_drum_unmeasurable_snapshots_left_out_only_when_allowed_and_listed():
+    good = [_drum_snapshot(a, i) for i, a in enumerate([46.0, 49.0, 52.0])]
+    pos, r = good[1]
+    empty = (pos + [0.0, 0.0, -0.3], r)  # the material has left the crop: no bin
+    ref = drum_dynamic_angle(good)
+    res = drum_dynamic_angle(good[:1] + [empty] + good[1:], max_skipped=1)
+    assert [i for i, _ in res.skipped] == [1] and "snapshot 1" in res.skipped[0][1]
+    assert res.angle_deg == pytest.approx(ref.angle_deg) and len(res.fits) == 3
+    with pytest.raises(MeasurementError, match="2 snapshots unmeasurable, at most 1"):
+        drum_dynamic_angle([empty, good[0], empty], max_skipped=1)
+    with pytest.raises(MeasurementError, match="no snapshot could be measured"):
+        drum_dynamic_angle([empty], max_skipped=3)
+    with pytest.raises(ValueError, match="max_skipped"):
+        drum_dynamic_angle(good, max_skipped=-1)
+
+
 @pytest.mark.parametrize("angle", [28.0, 36.0])
 def test_cylinder_pile_angle_on_cone(angle):
     pos, r = synthetic_pile(angle, shape="cone", x_range=(-0.25, 0.25), y_range=(-0.25, 0.25),

@@ -346,7 +346,9 @@ class DrumResult:
     angle_deg: beta = atan(|mean slope|) in degrees. mean_slope: mean of the
     per-snapshot slopes. slopes, angles_deg: per snapshot. mean_deg, std_deg:
     mean and sample std (ddof=1; NaN for one snapshot) of per-snapshot angles.
-    fits: per-snapshot :class:`ProfileFit` (x relative to the drum axis).
+    fits: per-snapshot :class:`ProfileFit` (x relative to the drum axis) of the measured
+    snapshots. skipped: ``(index, reason)`` of snapshots that could not be measured (fewer
+    than ``min_bins`` bins) and were left out, at most ``max_skipped`` of them.
     """
 
     angle_deg: float
@@ -356,6 +358,7 @@ class DrumResult:
     mean_deg: float
     std_deg: float
     fits: list[ProfileFit] = field(repr=False)
+    skipped: tuple[tuple[int, str], ...] = ()
 
 
 def drum_dynamic_angle(
@@ -367,6 +370,7 @@ def drum_dynamic_angle(
     y_range: tuple[float, float] = (0.030, 0.120),
     bin_width: float = 0.010,
     min_bins: int = 3,
+    max_skipped: int = 0,
 ) -> DrumResult:
     """Dynamic angle of repose beta_AoR_D of the rotating drum (spec B).
 
@@ -375,13 +379,19 @@ def drum_dynamic_angle(
     the x-z square of side ``crop_side`` (m) centred on ``axis_xz`` and y in
     ``y_range`` are binned in x (``bin_width``); bins whose surface reaches the
     crop's top edge (material above the crop, the surface is not seen there)
-    are left out. One line per snapshot; beta = atan(|mean slope|).
+    are left out. One line per snapshot; beta = atan(|mean slope|). A snapshot with fewer than
+    ``min_bins`` bins raises :class:`MeasurementError`, unless ``max_skipped`` > 0: then up to
+    that many such snapshots are left out of the mean and listed in ``DrumResult.skipped``
+    (with few large particles a steep frame can leave only 2 bins below the crop's top edge).
     """
     if len(snapshots) == 0:
         raise MeasurementError("drum_dynamic_angle: no snapshots")
+    if max_skipped < 0:
+        raise ValueError(f"max_skipped must be >= 0, got {max_skipped}")
     half = 0.5 * crop_side
     ax, az = axis_xz
     fits: list[ProfileFit] = []
+    skipped: list[tuple[int, str]] = []
     for i, snap in enumerate(snapshots):
         if isinstance(snap, tuple):
             pos, r = _as_particles(*snap)
@@ -396,10 +406,17 @@ def drum_dynamic_angle(
             & (pos[:, 1] >= y_range[0]) & (pos[:, 1] <= y_range[1])
         )
         prof = surface_profile(x[sel], z[sel] + r[sel], bin_width, (-half, half))
-        fits.append(
-            _fit_profile(prof, z_band=None, min_bins=min_bins,
-                         what=f"drum_dynamic_angle (snapshot {i})", exclude_above=half)
-        )
+        try:
+            fits.append(_fit_profile(prof, z_band=None, min_bins=min_bins,
+                                     what=f"drum_dynamic_angle (snapshot {i})", exclude_above=half))
+        except MeasurementError as exc:
+            skipped.append((i, str(exc)))
+            if len(skipped) > max_skipped:
+                more = f" ({len(skipped)} snapshots unmeasurable, at most {max_skipped} may be left out)" \
+                    if max_skipped > 0 else ""
+                raise MeasurementError(f"{exc}{more}") from None
+    if not fits:
+        raise MeasurementError("drum_dynamic_angle: no snapshot could be measured")
     slopes = np.array([f.slope for f in fits])
     angles = np.array([f.angle_deg for f in fits])
     mean_slope = float(slopes.mean())
@@ -411,6 +428,7 @@ def drum_dynamic_angle(
         mean_deg=float(angles.mean()),
         std_deg=float(angles.std(ddof=1)) if angles.size > 1 else float("nan"),
         fits=fits,
+        skipped=tuple(skipped),
     )
 
 
