@@ -253,6 +253,19 @@ def resolve_target(resp: Response, cfg: CampaignConfig, log) -> None:
     raise ConfigError(f"response '{resp.name}': target mapping needs 'file' or 'dem_at', got keys {sorted(t)}")
 
 
+def _fill_contiguous_batches(indices: Sequence[int], size: int) -> list[list[int]]:
+    """Split sorted sample indices into batches of at most ``size`` consecutive indices, so that
+    each sample keeps its own fills (a batch's worlds take consecutive fill numbers) even when a
+    resumed campaign runs only the samples missing here and there."""
+    batches: list[list[int]] = []
+    for i in indices:
+        if batches and len(batches[-1]) < size and batches[-1][-1] == i - 1:
+            batches[-1].append(i)
+        else:
+            batches.append([i])
+    return batches
+
+
 # ----------------------------------------------------------------------------- the campaign
 class Campaign:
     """Runs a :class:`CampaignConfig` end to end, resumably, into ``output``."""
@@ -314,9 +327,9 @@ class Campaign:
                 from tqdm import tqdm
 
                 bar = tqdm(total=len(todo), desc=resp.name, unit="sample")
-            for start in range(0, len(todo), self.cfg.batch_worlds):
-                batch = todo[start:start + self.cfg.batch_worlds]
+            for batch in _fill_contiguous_batches(todo, self.cfg.batch_worlds):
                 sets = [dict(zip(names, map(float, X[i]))) for i in batch]
+                # world k of the batch uses fill (batch[0] + k) * replicates + j: sample i's own fills
                 records = run_response(resp, sets, self.cfg, first_fill=batch[0] * resp.replicates)
                 with open(self.samples_path, "a") as fh:
                     for i, p, rec in zip(batch, sets, records):

@@ -88,6 +88,21 @@ def test_target_design_confirmation_and_validation_never_share_a_fill(tmp_path, 
     for name in ("alpha", "beta", "gamma"):
         used = [f for resp, fills in fake_dem.fills if resp == name for f in fills]
         assert len(used) == len(set(used)), name
+    # a resumed design with gaps: each remaining sample still gets its own fill (fill i for sample i)
+    out = tmp_path / "resumed"
+    out.mkdir()
+    pre = [json.dumps(dict(index=i, response=n, parameters={}, status="ok", error=None, angle_deg=30.0,
+                           replicate_angles_deg=[30.0] * (2 if n == "alpha" else 1)))
+           for i in (1, 2, 5) for n in ("alpha", "beta")]
+    (out / "samples.jsonl").write_text("\n".join(pre) + "\n")
+    fake_dem.clear()
+    fake_dem.fills.clear()
+    cp.Campaign(cfg, out, verbose=False).run_design(progress=False)
+    new = [json.loads(line) for line in (out / "samples.jsonl").read_text().splitlines()[len(pre):]]
+    for name, r in (("alpha", 2), ("beta", 1)):
+        done_order = [rec["index"] for rec in new if rec["response"] == name]
+        fills = [f for resp, rng in fake_dem.fills if resp == name for f in rng]
+        assert 1 not in done_order and fills == [i * r + j for i in done_order for j in range(r)], name
     with pytest.raises(ConfigError, match="target: unknown key"):
         cp.resolve_target(cp._response({"name": "a", "experiment": "baffle",
                                         "target": {"dem_at": {"mu_s_pp": 0.4}, "run": 2}}, "t"), cfg, print)
