@@ -458,7 +458,8 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
     lines = [f"# Calibration: {res['name']}", "", f"Parameters calibrated: {', '.join(res['parameters'])}; "
              f"fixed: {res['fixed']}; rolling model: {res['rolling']}; device: {res['device']}.", "", "## Targets", ""]
     for n, t in res["targets"].items():
-        lines.append(f"- {n}: {t['deg']:.3f} deg ({t['source']})")
+        spread = "" if t.get("std_deg") is None else f", std {t['std_deg']:.2f} deg between repeats"
+        lines.append(f"- {n}: {t['deg']:.3f} deg ({t['source']}{spread})")
     d = res["design"]
     lines += ["", f"## Design: {d['samples']} Latin hypercube samples ({d['held_out']} held out), "
               f"{len(d['failed'])} failed runs, campaign wall time {res['campaign_wall_s']} s", ""]
@@ -476,10 +477,14 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
     lines += ["", "## NSGA-II", "", f"- compromise: {comp}", f"- surrogate at the compromise: {sur} deg",
               f"- acceptable set: {o.get('acceptable_set_size', '?')} parameter sets within tolerance; their ranges "
               f"(the ambiguity of the calibration): {ranges}", ""]
-    lines += ["## Confirmation (DEM at the compromise)", "", "| response | target | surrogate | DEM | abs. error | rel. error |",
+    lines += ["## Confirmation (DEM at the compromise)", "",
+              "DEM: mean over its loose fills, +- their standard deviation where there are several.", "",
+              "| response | target | surrogate | DEM | abs. error | rel. error |",
               "| --- | ---: | ---: | ---: | ---: | ---: |"]
     for n, c in res["confirmation"]["responses"].items():
         dem = "failed" if c["dem_deg"] is None else f"{c['dem_deg']:.2f}"
+        if c["dem_deg"] is not None and c.get("dem_std_deg") is not None:
+            dem += f" +- {c['dem_std_deg']:.2f}"
         ae = "-" if c["abs_error_deg"] is None else f"{c['abs_error_deg']:.2f}"
         re_ = "-" if c["relative_error_pct"] is None else f"{c['relative_error_pct']:.2f} %"
         lines.append(f"| {n} | {c['target_deg']:.2f} | {c['surrogate_deg']:.2f} | {dem} | {ae} | {re_} |")
