@@ -5,6 +5,7 @@ from .errors import ConfigError, ContactOverflowError, OverlapError, StabilityEr
 from .materials import GRAVEL, PLEXIGLAS, STEEL, Material
 from .model import Model, State, Wall, WallMotion
 from .solver import DEMSolver, SettleReport, Simulation, WallStats
+from .shape_families import ShapeFamily, available_shape_families, register_shape_family, shape_family
 from .timestep import check_time_step, hertz_contact_time, hertz_max_overlap, rayleigh_time, time_step_limits
 
 __version__ = "0.1.0"
@@ -14,5 +15,5 @@ __all__ = [
     "ContactLaw", "ParameterSpec", "SubModel", "register", "Material", "GRAVEL", "PLEXIGLAS", "STEEL",
     "ConfigError", "ContactOverflowError", "OverlapError", "StabilityError", "WarpDEMError",
     "check_time_step", "hertz_contact_time", "hertz_max_overlap", "rayleigh_time", "time_step_limits",
-    "random_quaternions",
+    "random_quaternions", "ShapeFamily", "available_shape_families", "register_shape_family", "shape_family",
 ]
