@@ -631,6 +631,8 @@ def contact_kernel(law: ContactLaw):
             c.v_rel = vb + wp.cross(wb, cp - xb) - v_wall
             c.w_rel = wb - w_wall
             c.r_eff = ri
+            c.radius_i = ri
+            c.radius_j = 0.0  # a wall: flat partner (infinite radius)
             # lever x n: the contact point lies on the line through the sphere centre along n
             c.m_eff = mass_felt_at(mb, ib_mean, xi - xb, nrm)
             c.e_eff = 1.0 / ((1.0 - nu_i * nu_i) / e_i + (1.0 - nu_w * nu_w) / e_w)
@@ -702,6 +704,8 @@ def contact_kernel(law: ContactLaw):
             c.v_rel = (vb + wp.cross(wb, cp - xb)) - (vbj + wp.cross(wbj, cp - xbj))
             c.w_rel = wb - wbj
             c.r_eff = ri * rj / rr
+            c.radius_i = ri
+            c.radius_j = rj
             m_i = mass_felt_at(mb, ib_mean, xi - xb, nrm)
             m_j = mass_felt_at(mbj, ibj_mean, other.x - xbj, nrm)
             c.m_eff = m_i * m_j / (m_i + m_j)

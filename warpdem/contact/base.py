@@ -18,6 +18,9 @@ pair type (``pp`` particle-particle, ``pw`` particle-wall) in one table ``p[row,
 with ``row = 2 * world + pair_type``; each declared parameter ``mu_s`` becomes the calibration
 names ``mu_s_pp`` and ``mu_s_pw``. Adding a physical effect is one module that subclasses
 :class:`SubModel` plus the :func:`register` decorator; calibration reads the declarations.
+Such a module is found without any list kept by hand: a file in ``warpdem/contact/``, a
+module named by an installed package's ``warpdem.contact_models`` entry point, or a file or
+module loaded with :func:`warpdem.contact.load_module` (see ``docs/adding_an_effect.md``).
 """
 from __future__ import annotations
 
@@ -26,19 +29,29 @@ from typing import Callable, ClassVar
 
 import warp as wp
 
+from ..errors import ConfigError
+
 PAIR_TYPES = ("pp", "pw")
 KINDS = ("normal", "cohesion", "tangential", "rolling")
 
 
 @wp.struct
 class ContactInput:
-    """Geometry and kinematics of one contact, seen from sphere i (SI units)."""
+    """Geometry and kinematics of one contact, seen from sphere i (SI units).
+
+    ``radius_i`` and ``radius_j`` are the two sphere radii (LIGGGHTS ``radi``/``radj``), for
+    effects that need more than ``r_eff`` (e.g. the exact intersection area of two spheres in
+    :mod:`warpdem.contact.cohesion`). A wall is a flat partner of infinite radius:
+    ``radius_j = 0.0`` marks a particle-wall contact (then ``r_eff = radius_i``).
+    """
 
     normal: wp.vec3  # unit normal pointing from the partner towards sphere i
     overlap: float  # normal overlap delta_n [m], > 0 in contact
     v_rel: wp.vec3  # velocity of i's contact point minus the partner's [m/s]
     w_rel: wp.vec3  # angular velocity of i minus the partner's [rad/s]
-    r_eff: float  # effective radius R* [m]
+    r_eff: float  # effective radius R* [m]: r_i r_j / (r_i + r_j), or r_i against a wall
+    radius_i: float  # radius of sphere i [m]
+    radius_j: float  # radius of the partner sphere j [m]; 0.0 for a wall (flat, infinite radius)
     m_eff: float  # effective mass m* [kg]
     e_eff: float  # effective Young's modulus E* [Pa]
     g_eff: float  # effective shear modulus G* [Pa]
@@ -61,8 +74,6 @@ class ParameterSpec:
     def check(self, full_name: str, value: float) -> None:
         lo, hi = self.bounds
         if not (lo <= value <= hi):
-            from ..errors import ConfigError
-
             raise ConfigError(f"contact parameter '{full_name}' = {value} outside its admissible range [{lo}, {hi}] {self.unit}")
 
 
@@ -88,16 +99,51 @@ class SubModel:
 REGISTRY: dict[str, dict[str, type[SubModel]]] = {k: {} for k in KINDS}
 
 
+def _qualified_name(cls: type) -> str:
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+def _check_declaration(cls: type[SubModel]) -> None:
+    """Clear errors for a malformed sub-model class (caught at registration, not in a kernel)."""
+    what = f"contact sub-model class {_qualified_name(cls)}"
+    if not (isinstance(cls, type) and issubclass(cls, SubModel)):
+        raise ConfigError(f"{what} must subclass warpdem.contact.SubModel")
+    kind = getattr(cls, "kind", None)
+    if kind not in REGISTRY:
+        raise ConfigError(f"{what}: unknown sub-model kind {kind!r}, expected one of {KINDS}")
+    name = getattr(cls, "name", None)
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ConfigError(f"{what}: 'name' must be an identifier-like string, got {name!r}")
+    if cls.make is SubModel.make:
+        raise ConfigError(f"{what}: does not implement make(column)")
+    for spec in cls.parameters:
+        if not isinstance(spec, ParameterSpec):
+            raise ConfigError(f"{what}: parameters must be ParameterSpec instances, got {spec!r}")
+        lo, hi = spec.bounds
+        if not lo <= spec.default <= hi:
+            raise ConfigError(f"{what}: default of '{spec.name}' = {spec.default} outside its bounds [{lo}, {hi}]")
+
+
 def register(cls: type[SubModel]) -> type[SubModel]:
-    """Class decorator registering a sub-model under ``(cls.kind, cls.name)``."""
-    if cls.kind not in REGISTRY:
-        raise ValueError(f"unknown sub-model kind '{cls.kind}', expected one of {KINDS}")
-    if cls.name in REGISTRY[cls.kind]:
-        raise ValueError(f"a {cls.kind} sub-model named '{cls.name}' is already registered")
+    """Class decorator registering a sub-model under ``(cls.kind, cls.name)``.
+
+    Idempotent for re-imports: a class with the same qualified name (module + class name)
+    replaces the registered one silently (a module imported again, a notebook cell run
+    twice). A *different* class under a taken ``(kind, name)`` is a :class:`ConfigError`.
+    """
+    _check_declaration(cls)
+    current = REGISTRY[cls.kind].get(cls.name)
+    if current is not None and current is not cls and _qualified_name(current) != _qualified_name(cls):
+        raise ConfigError(
+            f"a {cls.kind} sub-model named '{cls.name}' is already registered by {_qualified_name(current)}; "
+            f"{_qualified_name(cls)} must use another name"
+        )
     REGISTRY[cls.kind][cls.name] = cls
     return cls
 
 
 def available(kind: str) -> list[str]:
     """Names of the registered sub-models of one kind."""
+    if kind not in REGISTRY:
+        raise ConfigError(f"unknown sub-model kind '{kind}', expected one of {KINDS}")
     return sorted(REGISTRY[kind])

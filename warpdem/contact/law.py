@@ -22,6 +22,9 @@ class ContactLaw:
     cohesion: str = "none"
     track_wear: bool = True
     submodels: dict[str, SubModel] = field(init=False, repr=False, compare=False)
+    # the registered classes: two laws naming the same sub-models are equal (and share a
+    # compiled kernel) only while the names resolve to the same classes
+    implementation: tuple[type[SubModel], ...] = field(init=False, repr=False, compare=True)
 
     def __post_init__(self) -> None:
         subs = {}
@@ -29,18 +32,36 @@ class ContactLaw:
             name = getattr(self, kind)
             if name not in REGISTRY[kind]:
                 raise ConfigError(
-                    f"unknown {kind} contact model '{name}'; registered: {sorted(REGISTRY[kind])}"
+                    f"unknown {kind} contact model '{name}'; registered: {sorted(REGISTRY[kind])} "
+                    "(a sub-model of your own: load its file first, e.g. plugins: [my_effects.py] "
+                    "or warpdem.contact.load_module('my_effects.py'))"
                 )
             subs[kind] = REGISTRY[kind][name]()
         object.__setattr__(self, "submodels", subs)
+        object.__setattr__(self, "implementation", tuple(type(subs[k]) for k in KINDS))
+        self.specs  # noqa: B018 - conflicting parameter declarations fail here, not later
+
+    def __reduce__(self):
+        # pickled by names: the receiving process resolves them in its own registry (load the
+        # same plugins there first)
+        return (type(self), (self.normal, self.tangential, self.rolling, self.cohesion, self.track_wear))
 
     @property
     def specs(self) -> dict[str, ParameterSpec]:
         """Declared base parameters (e.g. ``mu_s``) in table-column order."""
         out: dict[str, ParameterSpec] = {}
+        owner: dict[str, str] = {}
         for kind in KINDS:
-            for spec in self.submodels[kind].parameters:
+            sub = self.submodels[kind]
+            for spec in sub.parameters:
+                if spec.name in out and out[spec.name] != spec:
+                    # two sub-models may share a parameter only if they declare it identically
+                    raise ConfigError(
+                        f"contact law {self.describe()}: parameter '{spec.name}' is declared differently by "
+                        f"{owner[spec.name]} ({out[spec.name]}) and {kind} '{sub.name}' ({spec})"
+                    )
                 out.setdefault(spec.name, spec)
+                owner.setdefault(spec.name, f"{kind} '{sub.name}'")
         return out
 
     @property
