@@ -1,0 +1,117 @@
+"""Cohesion sub-models: the simplified JKR models of LIGGGHTS (``cohesion sjkr``/``sjkr2``).
+
+While two surfaces overlap (the kernel evaluates cohesion only in contact, delta > 0), an
+attractive normal force proportional to the contact area is added to the normal force:
+
+    F_coh = -k A                                                     (k: cohesion energy density [J/m^3])
+
+``sjkr`` (LIGGGHTS-PUBLIC ``src/cohesion_model_sjkr.h``, ``CohesionModel<COHESION_SJKR>::collision``),
+A = area of the circle in which the two sphere surfaces intersect, d = centre distance:
+
+    particle-particle  A = -pi/4 (d - r_i - r_j)(d + r_i - r_j)(d - r_i + r_j)(d + r_i + r_j) / d^2
+    particle-wall      A = pi (r_i^2 - d^2),  d = r_i - delta  (= pi (2 r_i delta - delta^2))
+
+With d = r_i + r_j - delta the four factors are -delta, 2 r_i - delta, 2 r_j - delta and
+2 (r_i + r_j) - delta, so the code evaluates the identical
+
+    A_pp = pi/4 delta (2 r_i - delta)(2 r_j - delta)(2 r_i + 2 r_j - delta) / d^2
+
+which avoids the cancellation of d - r_i - r_j in single precision (at delta = 1e-4 R the
+literal form loses ~1e-3 of A in float32). LIGGGHTS scales the wall force by the mesh's
+``area_ratio``; warpdem merges the triangles of one flat contact instead (ratio 1).
+
+``sjkr2`` (LIGGGHTS-PUBLIC ``src/cohesion_model_sjkr2.h``; doc ``gran_cohesion_sjkr2``), a
+linearised area:
+
+    particle-particle  A = 2 pi (2 R*) delta,  R* = r_i r_j / (r_i + r_j)
+    particle-wall      A = 2 pi r_i delta
+
+Note that for particles this is twice the first-order expansion of the exact ``sjkr`` area
+(two equal spheres: A_sjkr ~ pi R delta, A_sjkr2 = 2 pi R delta), while at a wall both
+agree to first order (2 pi r_i delta); a k calibrated with one model does not carry over to
+the other.
+
+In LIGGGHTS the cohesion force is part of ``F_n`` seen by the tangential (Coulomb) and
+rolling sub-models; here too (the law passes ``fn`` = normal + cohesion to them).
+
+Not built: a JKR model with a pull-off range (e.g. LAMMPS ``pair granular jkr``), in which
+a contact survives separation up to a negative overlap and its force depends on the loading
+history. It needs contact detection beyond touching (the contact kernel only creates a
+contact while delta > 0, and the Verlet skin would have to cover the pull-off distance), a
+per-contact "was touching" flag, and a normal model replacing Hertz rather than an additive
+term: a change of the contact kernel, not a sub-model. For the free-flowing to mildly
+cohesive bulk materials calibrated here (static angle of repose, draw-down), SJKR's energy
+density is the usual single cohesion knob of LIGGGHTS calibrations, so JKR was not worth
+that change.
+"""
+from __future__ import annotations
+
+import warp as wp
+
+from .base import ContactInput, ParameterSpec, SubModel, register
+
+COHESION_ENERGY_DENSITY = ParameterSpec(
+    "cohesion_energy_density", "J/m^3", 0.0, (0.0, 1.0e7),
+    "cohesion energy density k of SJKR: attractive normal force k A over the contact area A "
+    "(LIGGGHTS cohesionEnergyDensity)",
+)
+
+
+@wp.func
+def sjkr_contact_area(c: ContactInput):
+    """Area [m^2] of the intersection circle of the overlapping surfaces (LIGGGHTS sjkr)."""
+    delta = c.overlap
+    ri = c.radius_i
+    rj = c.radius_j
+    if rj <= 0.0:
+        # wall: pi (r_i^2 - (r_i - delta)^2)
+        return wp.pi * delta * (2.0 * ri - delta)
+    d = ri + rj - delta
+    return 0.25 * wp.pi * delta * (2.0 * ri - delta) * (2.0 * rj - delta) * (2.0 * (ri + rj) - delta) / (d * d)
+
+
+@wp.func
+def sjkr2_contact_area(c: ContactInput):
+    """Linearised contact area [m^2] of LIGGGHTS sjkr2: 2 pi (2 R*) delta, or 2 pi r_i delta at a wall."""
+    if c.radius_j <= 0.0:
+        return 2.0 * wp.pi * c.radius_i * c.overlap
+    return 2.0 * wp.pi * (2.0 * c.r_eff) * c.overlap
+
+
+@register
+class SimplifiedJKR(SubModel):
+    """F_coh = -k A with the exact intersection area (LIGGGHTS ``cohesion sjkr``)."""
+
+    kind = "cohesion"
+    name = "sjkr"
+    parameters = (COHESION_ENERGY_DENSITY,)
+    reference = ("LIGGGHTS-PUBLIC src/cohesion_model_sjkr.h (simplified JKR, F = -k A, A = exact "
+                 "intersection area of the two spheres)")
+
+    def make(self, column):
+        c_k = column("cohesion_energy_density")
+
+        @wp.func
+        def sjkr_cohesion(c: ContactInput, p: wp.array2d(dtype=float)):
+            return -p[c.row, c_k] * sjkr_contact_area(c)
+
+        return sjkr_cohesion
+
+
+@register
+class SimplifiedJKR2(SubModel):
+    """F_coh = -k A with A = 2 pi (2 R*) delta (LIGGGHTS ``cohesion sjkr2``)."""
+
+    kind = "cohesion"
+    name = "sjkr2"
+    parameters = (COHESION_ENERGY_DENSITY,)
+    reference = "LIGGGHTS-PUBLIC src/cohesion_model_sjkr2.h (F = -k A, A = 2 pi (2 R*) delta; wall 2 pi r_i delta)"
+
+    def make(self, column):
+        c_k = column("cohesion_energy_density")
+
+        @wp.func
+        def sjkr2_cohesion(c: ContactInput, p: wp.array2d(dtype=float)):
+            return -p[c.row, c_k] * sjkr2_contact_area(c)
+
+        return sjkr2_cohesion
