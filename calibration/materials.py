@@ -1,7 +1,12 @@
 """Bulk materials of the standard experiments (spec: /work/shared/spec/experiments.md,
-"Default material"): plain spheres with a diameter distribution, or a number-fraction mix
-of multi-sphere clump templates (seed paper Tables 2-3), plus the particle's elastic
-:class:`warpdem.Material`.
+"Default material"): plain spheres with a diameter distribution, a number-fraction mix
+of multi-sphere clump templates (seed paper Tables 2-3), or a shape family
+(:mod:`warpdem.shape_families`, e.g. ``elongated`` with a continuous ``aspect_ratio``) over
+a volume-equivalent diameter distribution, plus the particle's elastic :class:`warpdem.Material`.
+
+Shape parameters are calibrated like contact parameters: ``material.shape_parameters``
+declares them (unit, default, admissible bounds) and ``material.with_shape_parameters(...)``
+gives the same size distribution with another shape, e.g. one material per world.
 
 ``sample_particles(material, n=... | mass=..., rng)`` draws the particles to add to a model;
 positions come from :mod:`calibration.filling`.
@@ -9,14 +14,16 @@ positions come from :mod:`calibration.filling`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from warpdem import GRAVEL, ConfigError, Material
+from warpdem.contact import ParameterSpec
 
-__all__ = ["BulkMaterial", "ParticleSample", "sample_particles", "scale_template"]
+__all__ = ["BulkMaterial", "ParticleShape", "ParticleSample", "sample_particles", "scale_template",
+           "equal_number_size_classes"]
 
 
 def scale_template(template, factor: float):
@@ -35,6 +42,85 @@ def scale_template(template, factor: float):
                          np.asarray(template.offset) * f, template.volume_error * f**3)
 
 
+def equal_number_size_classes(d_min: float, d_max: float, size_classes: int) -> tuple[float, ...]:
+    """Representative diameters [m] of ``size_classes`` equal-number classes of a diameter
+    distribution uniform by number in [d_min, d_max] [m]: class k spans
+    [d_min + k w, d_min + (k + 1) w], w = (d_max - d_min) / size_classes, and is represented by
+    its mean-volume diameter cbrt(mean d^3) = cbrt((hi^4 - lo^4) / (4 (hi - lo))), so the
+    classes (equal number fractions) keep the distribution's mean particle volume exactly.
+    One class when d_min == d_max."""
+    if d_max == d_min:
+        return (float(d_min),)
+    edges = np.linspace(d_min, d_max, int(size_classes) + 1)
+    lo, hi = edges[:-1], edges[1:]
+    return tuple(float(x) for x in np.cbrt((hi**4 - lo**4) / (4.0 * (hi - lo))))
+
+
+@dataclass(frozen=True)
+class ParticleShape:
+    """A shape family at fixed parameter values over a volume-equivalent size distribution.
+
+    Attributes:
+        family: registered :mod:`warpdem.shape_families` name (e.g. ``"elongated"``).
+        values: ((name, value), ...) of every declared parameter (defaults filled in), sorted.
+        diameter: (d_min, d_max) [m]: volume-equivalent diameters, uniform by number.
+        size_classes: equal-number size classes, one clump template each
+            (:func:`equal_number_size_classes`).
+    """
+
+    family: str
+    values: tuple[tuple[str, float], ...]
+    diameter: tuple[float, float]
+    size_classes: int = 5
+
+    def __post_init__(self) -> None:
+        from warpdem.shape_families import shape_family
+
+        fam = shape_family(self.family)
+        object.__setattr__(self, "values", tuple(sorted(fam.check_parameters(**dict(self.values)).items())))
+        d = np.atleast_1d(np.asarray(self.diameter, dtype=float)).ravel()
+        if d.size == 1:
+            d = np.array([d[0], d[0]])
+        if d.size != 2 or not np.all(np.isfinite(d)) or d[0] <= 0 or d[1] < d[0]:
+            raise ConfigError(f"shape '{self.family}': diameter must be d > 0 m or (d_min, d_max) with "
+                              f"0 < d_min <= d_max [m] (volume-equivalent), got {self.diameter!r}")
+        if d[1] > 1.0:
+            raise ConfigError(f"shape '{self.family}': diameter {d[1]} m looks like millimetres; give metres")
+        object.__setattr__(self, "diameter", (float(d[0]), float(d[1])))
+        k = self.size_classes
+        if isinstance(k, bool) or int(k) != k or int(k) < 1:
+            raise ConfigError(f"shape '{self.family}': size_classes must be a positive integer, got {k!r}")
+        object.__setattr__(self, "size_classes", int(k))
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Parameter values by name."""
+        return dict(self.values)
+
+    @property
+    def class_diameters(self) -> tuple[float, ...]:
+        """Volume-equivalent diameter [m] of each size class (equal number fractions)."""
+        return equal_number_size_classes(*self.diameter, self.size_classes)
+
+    def templates(self, density: float) -> tuple[Any, ...]:
+        """One clump template per size class at ``density`` [kg/m^3]."""
+        from warpdem.shape_families import shape_family
+
+        fam = shape_family(self.family)
+        return tuple(fam.template(d, density, **self.parameters) for d in self.class_diameters)
+
+    def label(self) -> str:
+        a, b = self.diameter
+        sizes = f"{a * 1e3:g} mm" if a == b else f"{a * 1e3:g}-{b * 1e3:g} mm"
+        pars = ", ".join(f"{k}={v:g}" for k, v in self.values)
+        return f"{self.family} ({pars}) d_eq={sizes}"
+
+    def record(self) -> dict[str, Any]:
+        """Config-like JSON-able record: ``{type: shaped, shape, <parameters>, diameter, size_classes}``."""
+        return {"type": "shaped", "shape": self.family, **self.parameters, "diameter": list(self.diameter),
+                "size_classes": self.size_classes}
+
+
 @dataclass(frozen=True)
 class BulkMaterial:
     """A granular material: particle shape/size description and elastic solid.
@@ -44,6 +130,9 @@ class BulkMaterial:
             (d_min == d_max: one size).
         clumps: ((template, number fraction), ...) of clump templates
             (``warpdem.clump_geometry.ClumpTemplate``); fractions are normalised to 1.
+        shape: a :class:`ParticleShape` (shape family + parameters + volume-equivalent size
+            distribution); ``clumps`` is then derived from it (one template per size class,
+            equal number fractions) and any ``clumps`` passed in is replaced.
     Attributes:
         particle: elastic properties and density [kg/m^3] of the solid (templates are
             re-densified to it).
@@ -59,8 +148,18 @@ class BulkMaterial:
     solids_fraction: float = 0.60
     name: str = "bulk"
     source: Mapping[str, Any] = field(default_factory=dict, compare=False)
+    shape: ParticleShape | None = None
 
     def __post_init__(self) -> None:
+        if self.shape is not None:
+            if not isinstance(self.shape, ParticleShape):
+                raise ConfigError(f"BulkMaterial: shape must be a ParticleShape, got {type(self.shape).__name__}")
+            if self.diameter is not None:
+                raise ConfigError("BulkMaterial: a shaped material takes its sizes from shape.diameter; "
+                                  "do not give 'diameter' too")
+            if isinstance(self.particle, Material):
+                templates = self.shape.templates(self.particle.density)
+                object.__setattr__(self, "clumps", tuple((t, 1.0 / len(templates)) for t in templates))
         if (self.diameter is None) == (self.clumps is None):
             raise ConfigError("BulkMaterial: give exactly one of 'diameter' (spheres) or 'clumps' (clump mix)")
         if not isinstance(self.particle, Material):
@@ -137,8 +236,22 @@ class BulkMaterial:
         return cls(particle=particle, clumps=tuple(mix), solids_fraction=solids_fraction, name=label,
                    source={"type": "gravel", "fill_level": fill_level, "size_scale": size_scale})
 
+    @classmethod
+    def shaped(cls, family: str, d_min: float, d_max: float | None = None, size_classes: int = 5,
+               particle: Material = GRAVEL, solids_fraction: float = 0.60, name: str | None = None,
+               **shape_parameters: float) -> "BulkMaterial":
+        """Clumps of a shape family (:func:`warpdem.available_shape_families`) whose
+        volume-equivalent diameters are uniform by number in [d_min, d_max] [m] (fixed if
+        d_max is None), discretised into ``size_classes`` equal-number classes, one template
+        each; ``shape_parameters`` (e.g. ``aspect_ratio=1.5``) default to the family's
+        defaults and are checked against their admissible bounds."""
+        d_max = d_min if d_max is None else d_max
+        shape = ParticleShape(family, tuple(shape_parameters.items()), (d_min, d_max), size_classes)
+        return cls(particle=particle, solids_fraction=solids_fraction, name=name or shape.label(),
+                   source=shape.record(), shape=shape)
+
     _CONFIG_KEYS = ("type", "diameter", "fill_level", "size_scale", "density", "youngs_modulus", "poisson_ratio",
-                    "solids_fraction", "name")
+                    "solids_fraction", "name", "shape", "size_classes")
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any] | "BulkMaterial") -> "BulkMaterial":
@@ -146,16 +259,34 @@ class BulkMaterial:
 
             {type: spheres, diameter: [0.016, 0.020]}            # or diameter: 0.018
             {type: gravel, fill_level: medium, size_scale: 1.0}
-        Optional for both: density [kg/m^3], youngs_modulus [Pa], poisson_ratio, solids_fraction, name.
+            {shape: elongated, aspect_ratio: 1.5, diameter: [0.016, 0.020], size_classes: 5}
+        The last is a shape family (``type: shaped`` optional): ``diameter`` is the
+        volume-equivalent diameter [m], the family's parameters are keys of their own
+        (defaults where omitted), ``size_classes`` defaults to 5.
+        Optional for all: density [kg/m^3], youngs_modulus [Pa], poisson_ratio, solids_fraction, name.
         """
         if isinstance(cfg, BulkMaterial):
             return cfg
         if not isinstance(cfg, Mapping):
             raise ConfigError(f"material config must be a mapping, got {type(cfg).__name__}")
-        unknown = sorted(set(cfg) - set(cls._CONFIG_KEYS))
+        kind = cfg.get("type", "shaped" if "shape" in cfg else "spheres")
+        family = None
+        valid = list(cls._CONFIG_KEYS)
+        if kind == "shaped":
+            from warpdem.shape_families import shape_family
+
+            if "shape" not in cfg:
+                raise ConfigError("material config: type 'shaped' needs 'shape' (a shape family name, e.g. "
+                                  "'elongated')")
+            try:
+                family = shape_family(cfg["shape"])
+            except ConfigError as exc:
+                raise ConfigError(f"material config: {exc}") from None
+            valid += [p.name for p in family.parameters]
+        unknown = sorted(set(cfg) - set(valid))
         if unknown:
-            raise ConfigError(f"material config: unknown key(s) {unknown}; valid: {list(cls._CONFIG_KEYS)}")
-        kind = cfg.get("type", "spheres")
+            hint = _shape_parameter_hint(unknown) if family is None else ""
+            raise ConfigError(f"material config: unknown key(s) {unknown}; valid: {valid}{hint}")
         particle = Material(f"{kind}_particle", float(cfg.get("youngs_modulus", GRAVEL.youngs_modulus)),
                             float(cfg.get("poisson_ratio", GRAVEL.poisson_ratio)),
                             float(cfg.get("density", GRAVEL.density)))
@@ -163,25 +294,73 @@ class BulkMaterial:
             particle = GRAVEL
         phi = float(cfg.get("solids_fraction", 0.60))
         if kind == "spheres":
-            for bad in ("fill_level", "size_scale"):
+            for bad in ("fill_level", "size_scale", "shape", "size_classes"):
                 if bad in cfg:
-                    raise ConfigError(f"material config: '{bad}' applies to type 'gravel', not 'spheres'")
+                    raise ConfigError(f"material config: '{bad}' does not apply to type 'spheres'")
             if "diameter" not in cfg:
                 raise ConfigError("material config: type 'spheres' needs 'diameter' [m] (a number or [d_min, d_max])")
             d = np.atleast_1d(np.asarray(cfg["diameter"], dtype=float))
             out = cls.spheres(float(d[0]), float(d[-1]), particle=particle, solids_fraction=phi,
                               name=cfg.get("name"))
         elif kind == "gravel":
-            if "diameter" in cfg:
-                raise ConfigError("material config: 'diameter' applies to type 'spheres', not 'gravel'")
+            for bad in ("diameter", "shape", "size_classes"):
+                if bad in cfg:
+                    raise ConfigError(f"material config: '{bad}' does not apply to type 'gravel'")
             out = cls.gravel(cfg.get("fill_level", "medium"), particle=particle, solids_fraction=phi,
                              size_scale=float(cfg.get("size_scale", 1.0)))
             if "name" in cfg:
                 out = BulkMaterial(particle=out.particle, clumps=out.clumps, solids_fraction=phi, name=cfg["name"],
                                    source=out.source)
+        elif kind == "shaped":
+            for bad in ("fill_level", "size_scale"):
+                if bad in cfg:
+                    raise ConfigError(f"material config: '{bad}' applies to type 'gravel', not a shape family")
+            if "diameter" not in cfg:
+                raise ConfigError(f"material config: shape '{family.name}' needs 'diameter' [m] (volume-equivalent; "
+                                  f"a number or [d_min, d_max])")
+            d = np.atleast_1d(np.asarray(cfg["diameter"], dtype=float))
+            params = {p.name: cfg[p.name] for p in family.parameters if p.name in cfg}
+            out = cls.shaped(family.name, float(d[0]), float(d[-1]), size_classes=cfg.get("size_classes", 5),
+                             particle=particle, solids_fraction=phi, name=cfg.get("name"), **params)
         else:
-            raise ConfigError(f"material config: unknown type {kind!r}; valid: 'spheres', 'gravel'")
+            raise ConfigError(f"material config: unknown type {kind!r}; valid: 'spheres', 'gravel', 'shaped'")
         return out
+
+    # ------------------------------------------------------------------ shape parameters
+    @property
+    def shape_parameters(self) -> dict[str, ParameterSpec]:
+        """Declared shape parameters by name (empty for plain spheres and fixed clump mixes)."""
+        if self.shape is None:
+            return {}
+        from warpdem.shape_families import shape_family
+
+        return shape_family(self.shape.family).parameter_specs
+
+    @property
+    def shape_parameter_values(self) -> dict[str, float]:
+        """Current shape parameter values by name (empty without a shape family)."""
+        return {} if self.shape is None else self.shape.parameters
+
+    def with_shape_parameters(self, **values: float) -> "BulkMaterial":
+        """A new material with the same particle solid and size distribution and the given
+        shape parameters (the others keep their current values). ConfigError for a name the
+        material does not declare or a value outside its admissible range."""
+        if not values:
+            return self
+        if self.shape is None:
+            raise ConfigError(f"material '{self.name}' has no shape parameters (got {sorted(values)}); build it "
+                              f"from a shape family, e.g. BulkMaterial.shaped('elongated', d_min, d_max, "
+                              f"aspect_ratio=...) or a config with 'shape: elongated'")
+        from warpdem.shape_families import shape_family
+
+        family = shape_family(self.shape.family)
+        unknown = sorted(set(values) - set(family.parameter_specs))
+        if unknown:
+            raise ConfigError(f"material '{self.name}' (shape '{family.name}'): unknown shape parameter(s) "
+                              f"{unknown}; valid: {list(family.parameter_specs)}")
+        shape = replace(self.shape, values=tuple({**self.shape.parameters, **values}.items()))
+        name = shape.label() if self.name == self.shape.label() else self.name
+        return replace(self, clumps=None, shape=shape, name=name, source={**dict(self.source), **shape.record()})
 
     # ------------------------------------------------------------------ properties
     @property
@@ -218,12 +397,35 @@ class BulkMaterial:
                                "poisson_ratio": self.particle.poisson_ratio, "solids_fraction": self.solids_fraction}
         if self.is_spheres:
             out.update(type="spheres", diameter=list(self.diameter))
+        elif self.shape is not None:
+            from warpdem.shape_families import shape_family
+
+            fam = shape_family(self.shape.family)
+            out.update(type="shaped", shape=fam.name, shape_parameters=self.shape.parameters,
+                       diameter=list(self.shape.diameter), size_classes=self.shape.size_classes,
+                       class_diameters=[round(d, 9) for d in self.shape.class_diameters],
+                       spheres_per_clump=fam.spheres_per_particle,
+                       surface_bumpiness=round(fam.surface_bumpiness(**self.shape.parameters), 6),
+                       shape_reference=fam.reference)
         else:
             out.update(type="clumps", mix={getattr(t, "name", f"t{i}"): round(f, 6) for i, (t, f) in enumerate(self.clumps)},
                        spheres_per_clump={getattr(t, "name", f"t{i}"): int(len(t.radii))
                                           for i, (t, _) in enumerate(self.clumps)})
         out.update({k: v for k, v in self.source.items() if k not in out})
         return out
+
+
+def _shape_parameter_hint(keys: Sequence[str]) -> str:
+    """' (... is a parameter of shape family X; add shape: X)' for keys some family declares."""
+    try:
+        from warpdem.shape_families import available_shape_families, shape_family
+    except ImportError:  # pragma: no cover
+        return ""
+    for fam in available_shape_families():
+        hit = [k for k in keys if k in shape_family(fam).parameter_specs]
+        if hit:
+            return f" ({hit[0]!r} is a parameter of shape family '{fam}': add 'shape: {fam}')"
+    return ""
 
 
 def _bounding_radius(t) -> float:
