@@ -1,13 +1,37 @@
 """Rolling-resistance sub-models.
 
-``cdt``  constant directional torque (Ai et al. 2011 model A; EDEM's Hertz-Mindlin rolling
-         friction): tau_i = -mu_r F_n R_i w_rel/|w_rel|, R_i = distance from the sphere centre
-         to the contact point (EDEM convention). Guard against reversal jitter: the torque is
-         capped so that it cannot reverse w_rel within one step, |tau| <= I* |w_rel| / dt.
-``epsd`` elastic-plastic spring-dashpot without viscous term (Ai et al. 2011 model C;
-         LIGGGHTS ``rolling_friction epsd2``): incremental spring torque
-         M_r <- M_r - k_r dtheta_r with k_r = 2.25 k_n mu_r^2 R*^2, k_n = F_n/delta =
-         4/3 E* sqrt(R* delta), capped at |M_r| <= mu_r R* F_n. Holds a static pile.
+``cdt``   constant directional torque (Ai et al. 2011 model A). **This is EDEM's "Rolling
+          Friction"** (Hertz-Mindlin with the standard rolling friction option, used by the
+          seed paper's EDEM runs): tau_i = -mu_r F_n R_i w_rel/|w_rel|, R_i = distance from
+          the sphere centre to the contact point (EDEM convention). Guard against reversal
+          jitter: the torque is capped so that it cannot reverse w_rel within one step,
+          |tau| <= I* |w_rel| / dt. (LIGGGHTS ``rolling_friction cdt``, src/rolling_model_cdt.h,
+          is the same model with the elastic F_n = k_n delta and lever R* instead, no guard.)
+``epsd``  elastic-plastic spring-dashpot of **Ai et al. (2011) model C** without its viscous
+          term (eta_r = 0); the spring is LIGGGHTS ``rolling_friction epsd``'s
+          (src/rolling_model_epsd.h: ``kr = 2.25*cdata.kn*rmu*rmu*reff*reff``), its dashpot is
+          left out. **It is not LIGGGHTS epsd2** (older warpdem docs said so; the name is kept
+          for configs and records). Incremental spring torque M_r <- M_r - k_r w_roll dt,
+              k_r = 2.25 k_n mu_r^2 R*^2,  k_n = F_n,el / delta = 4/3 E* sqrt(R* delta)
+          (Ai et al. 2011, with the Hertz secant stiffness as k_n), capped at
+          |M_r| <= mu_r R* max(F_n, 0). Holds a static pile.
+``epsd2`` LIGGGHTS ``rolling_friction epsd2`` (LIGGGHTS-PUBLIC src/rolling_model_epsd2.h,
+          ``RollingModel<ROLLING_EPSD2>::calcRollTorque``): the same incremental spring without
+          dashpot, but the rolling stiffness is tied to the *current* tangential stiffness of
+          the step and does not depend on mu_r:
+              k_r = k_t R*^2,  k_t = 8 G* sqrt(R* delta)   (``kr = cdata.kt*reff*reff``;
+                                                          kt = St of normal_model_hertz.h)
+              |M_r| <= mu_r R* |F_n|                        (``fabs(cdata.Fn)*reff*rmu``)
+          R* = r_i r_j / (r_i + r_j) between particles and r_i at a wall (LIGGGHTS ``reff``
+          there). F_n includes damping and cohesion, as LIGGGHTS' ``cdata.Fn`` does.
+          One difference: LIGGGHTS keeps the stored torque as is; here, as for ``epsd`` and
+          the tangential spring, it is turned into the current tangent plane (magnitude kept),
+          which only matters while the contact normal rotates.
+
+For the same mu_r, k_r(epsd2) / k_r(epsd) = 8 G* / (3 E* mu_r^2) (6.1 for equal materials
+with nu = 0.3 and mu_r = 0.3). The plastic limit mu_r R* F_n is the same, so both hold a
+sphere on a slope iff tan(theta) <= mu_r; they differ in the rolling angle needed to
+mobilise it (smaller for epsd2 while mu_r < sqrt(8 G* / (3 E*)), ~0.74 at nu = 0.3).
 
 Reference: Ai, J., Chen, J.-F., Rotter, J. M., Ooi, J. Y. (2011) Assessment of rolling
 resistance models in discrete element simulations. Powder Technology 206, 269-282.
@@ -21,12 +45,32 @@ from .base import ContactInput, ParameterSpec, SubModel, register
 MU_R = ParameterSpec("mu_r", "-", 0.1, (0.0, 10.0), "rolling friction coefficient")
 
 
+@wp.func
+def rolling_spring_torque(c: ContactInput, spring: wp.vec3, k_r: float, m_max: float):
+    """Elastic-plastic rolling spring: M <- M - k_r w_roll dt, |M| <= m_max (returns M).
+
+    The stored torque is first turned into the current tangent plane (magnitude kept)."""
+    n = c.normal
+    m_len = wp.length(spring)
+    m = spring - wp.dot(spring, n) * n
+    m_proj = wp.length(m)
+    if m_proj > 1.0e-30:
+        m = m * (m_len / m_proj)
+    w_roll = c.w_rel - wp.dot(c.w_rel, n) * n
+    m = m - k_r * w_roll * c.dt
+    ml = wp.length(m)
+    if ml > m_max:
+        if ml > 0.0:
+            m = m * (m_max / ml)
+    return m
+
+
 @register
 class ConstantDirectionalTorque(SubModel):
     kind = "rolling"
     name = "cdt"
     parameters = (MU_R,)
-    reference = "Ai et al. (2011) model A; EDEM Hertz-Mindlin rolling friction"
+    reference = "Ai et al. (2011) model A; EDEM Hertz-Mindlin rolling friction; LIGGGHTS rolling_friction cdt"
 
     def make(self, column):
         c_mu = column("mu_r")
@@ -51,30 +95,40 @@ class ElasticPlasticSpringDashpot(SubModel):
     name = "epsd"
     parameters = (MU_R,)
     needs_history = True
-    reference = "Ai et al. (2011) model C; LIGGGHTS rolling_friction epsd2"
+    reference = ("Ai et al. (2011) model C without viscous term: k_r = 2.25 k_n mu_r^2 R*^2 "
+                 "(LIGGGHTS rolling_friction epsd's spring; not LIGGGHTS epsd2)")
 
     def make(self, column):
         c_mu = column("mu_r")
 
         @wp.func
         def epsd_rolling(c: ContactInput, p: wp.array2d(dtype=float), fn: float, spring: wp.vec3):
-            n = c.normal
             mu_r = p[c.row, c_mu]
-            # keep the stored torque in the current tangent plane (magnitude kept)
-            m_len = wp.length(spring)
-            m = spring - wp.dot(spring, n) * n
-            m_proj = wp.length(m)
-            if m_proj > 1.0e-30:
-                m = m * (m_len / m_proj)
-            w_roll = c.w_rel - wp.dot(c.w_rel, n) * n
             k_n = 4.0 / 3.0 * c.e_eff * wp.sqrt(c.r_eff * c.overlap)
             k_r = 2.25 * k_n * mu_r * mu_r * c.r_eff * c.r_eff
-            m = m - k_r * w_roll * c.dt
-            m_max = mu_r * c.r_eff * wp.max(fn, 0.0)
-            ml = wp.length(m)
-            if ml > m_max:
-                if ml > 0.0:
-                    m = m * (m_max / ml)
+            m = rolling_spring_torque(c, spring, k_r, mu_r * c.r_eff * wp.max(fn, 0.0))
             return m, m
 
         return epsd_rolling
+
+
+@register
+class LiggghtsEPSD2(SubModel):
+    kind = "rolling"
+    name = "epsd2"
+    parameters = (MU_R,)
+    needs_history = True
+    reference = ("LIGGGHTS rolling_friction epsd2 (LIGGGHTS-PUBLIC src/rolling_model_epsd2.h): "
+                 "k_r = k_t R*^2, k_t = 8 G* sqrt(R* delta), |M_r| <= mu_r R* |F_n|")
+
+    def make(self, column):
+        c_mu = column("mu_r")
+
+        @wp.func
+        def epsd2_rolling(c: ContactInput, p: wp.array2d(dtype=float), fn: float, spring: wp.vec3):
+            k_t = 8.0 * c.g_eff * wp.sqrt(c.r_eff * c.overlap)
+            k_r = k_t * c.r_eff * c.r_eff
+            m = rolling_spring_torque(c, spring, k_r, p[c.row, c_mu] * c.r_eff * wp.abs(fn))
+            return m, m
+
+        return epsd2_rolling
