@@ -404,7 +404,7 @@ class BulkMaterial:
             out.update(type="shaped", shape=fam.name, shape_parameters=self.shape.parameters,
                        diameter=list(self.shape.diameter), size_classes=self.shape.size_classes,
                        class_diameters=[round(d, 9) for d in self.shape.class_diameters],
-                       spheres_per_clump=fam.spheres_per_particle,
+                       spheres_per_clump=int(len(self.clumps[0][0].radii)),
                        surface_bumpiness=round(fam.surface_bumpiness(**self.shape.parameters), 6),
                        shape_reference=fam.reference)
         else:
