@@ -239,3 +239,34 @@ def test_entry_points_are_queried_for_the_warpdem_group(monkeypatch):
     with pytest.warns(ContactPluginWarning, match="'ghost' = 'wd_test_ghost_module'.*ModuleNotFoundError"):
         assert contact.discover_plugins() == []
     assert asked == [{"group": "warpdem.contact_models"}]
+
+
+def test_the_documented_example_works(tmp_path):
+    """docs/adding_an_effect.md: its one-file example loads, and the DMT pull-off it
+    implements (F = -2 pi w R*) is what a two-sphere model feels."""
+    import math
+    import re
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "adding_an_effect.md").read_text()
+    example = re.findall(r"```python\n(.*?)```", doc, re.S)[0]
+    assert "@register" in example
+    (tmp_path / "my_effects.py").write_text(example)
+    load_module(tmp_path / "my_effects.py")
+    law = wd.ContactLaw(cohesion="dmt", rolling="epsd2")
+    assert law.parameter_names == ["restitution_pp", "restitution_pw", "work_of_adhesion_pp", "work_of_adhesion_pw",
+                                   "mu_s_pp", "mu_s_pw", "mu_r_pp", "mu_r_pw"]
+    assert law.specs["work_of_adhesion"].unit == "J/m^2"
+    delta, w = 1.0e-5, 0.2  # pull 5.7e-3 N, Hertz 1.55e-2 N
+    b = wd.ModelBuilder(contact_law=law, gravity=(0.0, 0.0, 0.0))
+    b.add_material(wd.GRAVEL)
+    b.add_spheres([(0.0, 0.0, 0.0), (2 * R - delta, 0.0, 0.0)], R, "gravel")
+    b.set_contact_parameters(work_of_adhesion_pp=w, work_of_adhesion_pw=0.0)
+    sim = wd.Simulation(b.finalize("cpu"), 1e-6)
+    x = sim.state.body_q.numpy().astype(np.float64)
+    sim.run(3)
+    d = 2 * R - (x[1, 0] - x[0, 0])
+    hertz = 4.0 / 3.0 * effective_youngs_modulus(wd.GRAVEL, wd.GRAVEL) * np.sqrt(R / 2) * d**1.5
+    # forces of the third step: the spheres barely moved (|dx| ~ 1e-12 m)
+    f = sim.solver.sphere_f.numpy()
+    assert -f[0, 0] == pytest.approx(hertz - 2 * math.pi * w * R / 2, rel=1e-3)
