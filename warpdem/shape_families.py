@@ -140,7 +140,8 @@ class ShapeFamily:
         values = self.check_parameters(**params)
         unit = _unit_template(type(self), tuple(sorted(values.items())))
         f = d  # the unit template has d_eq = 1 m and density 1 kg/m^3
-        label = f"{self.name}(" + ", ".join(f"{k}={v:g}" for k, v in sorted(values.items())) + f") d_eq={d * 1e3:.4g} mm"
+        pars = ", ".join(f"{k}={v:g}" for k, v in sorted(values.items()))
+        label = f"{self.name}({pars}) d_eq={d * 1e3:.4g} mm"
         return ClumpTemplate(label, unit.centers * f, unit.radii * f, rho, unit.volume * f**3,
                              rho * unit.volume * f**3, unit.inertia_principal * (rho * f**5), unit.rotation,
                              unit.offset * f, unit.volume_error * f**3)
