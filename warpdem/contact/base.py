@@ -100,7 +100,7 @@ REGISTRY: dict[str, dict[str, type[SubModel]]] = {k: {} for k in KINDS}
 
 
 def _qualified_name(cls: type) -> str:
-    return f"{cls.__module__}.{cls.__qualname__}"
+    return f"{getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', repr(cls))}"
 
 
 def _check_declaration(cls: type[SubModel]) -> None:
