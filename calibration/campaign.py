@@ -36,8 +36,9 @@ from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
 from .experiments.common import _jsonable, cpu_processes
 from .measurement.records import load_measurements
+from .model_description import ModelDescription
 
-TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "parameters", "fixed", "design", "batch_worlds",
+TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "material", "plugins", "parameters", "fixed", "design", "batch_worlds",
             "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills"}
 FILL_MODES = ("independent", "shared")
 # first loose-fill index of each kind of DEM run when fills are independent: design sample i uses
@@ -70,7 +71,7 @@ class CampaignConfig:
     responses: list[Response]
     validation: Response | None = None
     fixed: dict[str, float] = field(default_factory=dict)
-    rolling: str = "epsd"
+    model: ModelDescription = field(default_factory=ModelDescription)
     samples: int = 24
     held_out: int = 6
     seed: int = 0
@@ -122,19 +123,21 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
     for k in ("parameters", "responses"):
         if k not in raw:
             raise ConfigError(f"{source}: missing '{k}'")
-    law = wd.ContactLaw(**(raw.get("contact_law") or {"rolling": "epsd"}))
+    model = ModelDescription.from_config(raw, base_dir=base_dir, where=source)
     params = raw["parameters"]
     if not isinstance(params, Mapping) or not params:
-        raise ConfigError(f"{source}: 'parameters' must map contact-parameter names to [lower, upper]")
+        raise ConfigError(f"{source}: 'parameters' must map parameter names to [lower, upper]")
     plist = []
     for name, bounds in params.items():
-        law.split_name(name)  # unknown names raise, listing the law's parameters
-        if not (isinstance(bounds, Sequence) and len(bounds) == 2):
-            raise ConfigError(f"{source}: parameters.{name} must be [lower, upper], got {bounds!r}")
-        plist.append(Parameter(name, float(bounds[0]), float(bounds[1])))
-    fixed = {k: float(v) for k, v in (raw.get("fixed") or {}).items()}
+        # unknown names and ranges outside the sub-model's admissible bounds fail here, before any DEM
+        lo, hi = model.check_bounds(name, bounds, f"{source}: parameters")
+        spec = model.parameter_specs()[name]
+        plist.append(Parameter(name, lo, hi, spec.unit, spec.description))
+    fixed_raw = raw.get("fixed") or {}
+    if not isinstance(fixed_raw, Mapping):
+        raise ConfigError(f"{source}: 'fixed' must map parameter names to values, got {fixed_raw!r}")
+    fixed = {k: model.check_value(k, v, f"{source}: fixed") for k, v in fixed_raw.items()}
     for k in fixed:
-        law.split_name(k)
         if k in params:
             raise ConfigError(f"{source}: '{k}' is both calibrated and fixed")
     design = dict(raw.get("design") or {})
@@ -145,7 +148,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         name=str(raw.get("name", Path(source).stem)), space=ParameterSpace(tuple(plist)),
         responses=[_response(r, f"{source}: responses[{i}]") for i, r in enumerate(raw["responses"])],
         validation=_response(raw["validation"], f"{source}: validation") if raw.get("validation") else None,
-        fixed=fixed, rolling=law.rolling, samples=int(design.get("samples", 24)),
+        fixed=fixed, model=model, samples=int(design.get("samples", 24)),
         held_out=int(design.get("held_out", 6)), seed=int(design.get("seed", 0)),
         batch_worlds=int(raw.get("batch_worlds", 8)), device=raw.get("device"), processes=raw.get("processes", "auto"),
         fills=str(raw.get("fills", "independent")),
@@ -190,7 +193,11 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
         settings["first_fill_index"] = int(first_fill)
     elif r > 1:
         settings["fill_per_world"] = True
-    exp = make_experiment(resp.experiment, resp.scale, rolling=cfg.rolling, **settings)
+    model = cfg.model
+    if model.material is not None and "material" not in settings:
+        settings["material"] = model.material
+    exp = make_experiment(resp.experiment, resp.scale, contact_law=model.contact_law, plugins=model.plugins,
+                          **settings)
     sets = [{**cfg.fixed, **p} for p in parameter_sets for _ in range(r)]
     t0 = time.perf_counter()
     try:
@@ -352,7 +359,8 @@ class Campaign:
         cfg = self.cfg
         pnames = [p.name for p in cfg.space.parameters]
         t_start = time.perf_counter()
-        res: dict[str, Any] = dict(name=cfg.name, parameters=pnames, fixed=cfg.fixed, rolling=cfg.rolling,
+        res: dict[str, Any] = dict(name=cfg.name, parameters=pnames, fixed=cfg.fixed,
+                                   model=cfg.model.describe(), contact_law=cfg.model.contact_law.describe(),
                                    device=str(cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")))
         for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
             resolve_target(resp, cfg, self.log)
@@ -453,10 +461,18 @@ class Campaign:
         return res
 
 
+def _material_label(res: Mapping[str, Any]) -> str:
+    mat = (res.get("model") or {}).get("material")
+    if not mat:
+        return "each experiment's scale default"
+    return str(mat.get("name", mat)) if isinstance(mat, Mapping) else str(mat)
+
+
 def summary_markdown(res: Mapping[str, Any]) -> str:
     """Short Markdown account of a campaign."""
     lines = [f"# Calibration: {res['name']}", "", f"Parameters calibrated: {', '.join(res['parameters'])}; "
-             f"fixed: {res['fixed']}; rolling model: {res['rolling']}; device: {res['device']}.", "", "## Targets", ""]
+             f"fixed: {res['fixed']}; device: {res['device']}.", "",
+             f"Contact law: {res['contact_law']}; material: {_material_label(res)}.", "", "## Targets", ""]
     for n, t in res["targets"].items():
         spread = "" if t.get("std_deg") is None else f", std {t['std_deg']:.2f} deg between repeats"
         lines.append(f"- {n}: {t['deg']:.3f} deg ({t['source']}{spread})")

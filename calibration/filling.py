@@ -298,11 +298,12 @@ def check_no_overlap(fill: FillResult, tol: float = 0.0) -> float:
 
 def pour_fill(region: Region, sample: ParticleSample, add_walls: Callable, rng: np.random.Generator | int | None = None,
               device: str | None = None, ke_per_particle: float = 1.0e-6, max_time: float = 1.5,
-              max_pours: int = 30, rolling: str = "epsd") -> FillResult:
+              max_pours: int = 30, contact_law=None) -> FillResult:
     """Fill a region that one loose pass cannot hold (a closed drum): place what fits
     (:func:`random_fill`), let it settle in a one-world model whose walls ``add_walls(builder)``
     adds (default contact parameters of the law, particle material = the sample's), then
     place more in the freed space above the bed, and repeat until every particle is in.
+    ``contact_law``: the experiment's :class:`warpdem.ContactLaw` (None: Hertz-Mindlin + epsd).
 
     The result holds settled positions (``settled=True``): neighbours overlap by their
     weight's Hertz overlap, so models built from it need a lenient overlap check.
@@ -318,7 +319,7 @@ def pour_fill(region: Region, sample: ParticleSample, add_walls: Callable, rng: 
         if pours > max_pours or k == 0:
             raise FillError(f"pour_fill: {k} of {sample.n} particles placed after {pours - 1} pour(s); "
                             f"the region cannot hold this material")
-        b = wd.ModelBuilder(1, contact_law=wd.ContactLaw(rolling=rolling))
+        b = wd.ModelBuilder(1, contact_law=contact_law if contact_law is not None else wd.ContactLaw(rolling="epsd"))
         mat = sample.material.particle
         b.add_material(mat)
         add_walls(b)

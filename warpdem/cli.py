@@ -1,58 +1,77 @@
-"""``warpdem`` console command: one entry point for the package's jobs.
+"""``warpdem`` console command: one front door for every job.
 
-    warpdem pour [--spheres N] [--device cpu|cuda]   pour a box and lift its baffle (VTK out)
-    warpdem experiment CONFIG                         run one standard experiment from a config
-    warpdem measure IMAGE ...                         measure a repose angle from an image/video
-    warpdem calibrate CONFIG                          multi-response calibration campaign
-    warpdem bench [--spheres N] [--device ...]        settled-bed benchmark (one JSON line)
+The engine does not know the applications built on it: subcommands are discovered through the
+entry-point group ``warpdem.commands`` (``name = "package.module:function"``, the function takes
+the remaining arguments and returns an exit code). This package declares its own
+(experiment, measure, calibrate, diagnose, pump, pour, bench) in ``pyproject.toml``; another
+installed package can add one the same way.
 """
 from __future__ import annotations
 
-import importlib
-import runpy
 import sys
-from pathlib import Path
+from importlib import metadata
+from typing import Callable, Sequence
 
-COMMANDS = {
-    "experiment": ("calibration.experiments.cli", "experiment_main"),
-    "measure": ("calibration.measurement.cli", "measure_main"),
-    "calibrate": ("calibration.campaign", "calibrate_main"),
+COMMAND_GROUP = "warpdem.commands"
+
+#: one-line help per known command (discovered commands without a line show their target)
+HELP = {
+    "experiment": "run one standard experiment (baffle, drum, cylinder) from a config",
+    "measure": "measure a repose angle from a photograph or a drum video",
+    "calibrate": "multi-response calibration campaign (LHS, DEM, surrogates, NSGA-II)",
+    "diagnose": "model versus measurements: where it fails, which physical effect is missing",
+    "pump": "slurry-pump wear prototype (particles, simplified flow, wear per triangle)",
+    "pour": "pour a box and lift its baffle (VTK out): a first look at the engine",
+    "bench": "settled-bed engine benchmark (one JSON line)",
 }
-ROOT = Path(__file__).resolve().parent.parent
 
 
-def _script(rel: str, argv: list[str]) -> int:
-    path = ROOT / rel
-    if not path.exists():
-        print(f"warpdem: {rel} is not available in this installation (run from a source checkout)", file=sys.stderr)
-        return 2
-    sys.argv = [str(path)] + argv
-    sys.path.insert(0, str(path.parent))
-    runpy.run_path(str(path), run_name="__main__")
-    return 0
+def version() -> str:
+    try:
+        return metadata.version("warpdem")
+    except metadata.PackageNotFoundError:  # running from a source tree that is not installed
+        from . import __version__
+
+        return __version__
 
 
-def main(argv: list[str] | None = None) -> int:
+def commands() -> dict[str, metadata.EntryPoint]:
+    """Subcommands registered in the ``warpdem.commands`` entry-point group, by name."""
+    return {ep.name: ep for ep in metadata.entry_points(group=COMMAND_GROUP)}
+
+
+def _usage(found: dict[str, metadata.EntryPoint]) -> str:
+    lines = [f"warpdem {version()}: discrete element method in NVIDIA Warp", "",
+             "usage: warpdem COMMAND [ARGS] (warpdem COMMAND --help for its options)", "", "commands:"]
+    for name in sorted(found):
+        lines.append(f"  {name:<11} {HELP.get(name, found[name].value)}")
+    if not found:
+        lines.append("  (none registered: install the package, e.g. `pip install .`)")
+    lines += ["", "  --version   print the version"]
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    found = commands()
     if not argv or argv[0] in ("-h", "--help"):
-        print(__doc__)
+        print(_usage(found))
+        return 0
+    if argv[0] in ("--version", "-V"):
+        print(f"warpdem {version()}")
         return 0
     cmd, rest = argv[0], argv[1:]
-    if cmd == "pour":
-        return _script("examples/pour_box.py", rest)
-    if cmd == "bench":
-        return _script("benchmarks/settled_bed.py", rest)
-    if cmd not in COMMANDS:
-        print(f"warpdem: unknown command '{cmd}'; commands: pour, experiment, measure, calibrate, bench", file=sys.stderr)
+    if cmd not in found:
+        print(f"warpdem: unknown command '{cmd}'; commands: {', '.join(sorted(found)) or 'none registered'}",
+              file=sys.stderr)
         return 2
-    module, func = COMMANDS[cmd]
     try:
-        fn = getattr(importlib.import_module(module), func)
+        fn: Callable[[list[str]], int | None] = found[cmd].load()
     except (ImportError, AttributeError) as exc:
-        print(f"warpdem {cmd}: not available ({exc})", file=sys.stderr)
+        print(f"warpdem {cmd}: cannot load {found[cmd].value} ({exc})", file=sys.stderr)
         return 2
     rc = fn(rest)
-    return int(rc or 0)
+    return int(rc) if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

@@ -46,6 +46,7 @@ class BaffleBox(Experiment):
 
     name: ClassVar[str] = "baffle"
     angle_name: ClassVar[str] = "alpha_AoR_S"
+    OBSERVABLES: ClassVar[dict[str, str]] = {"static_angle": "deg", "bulk_density": "kg/m^3"}
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
         "paper": {},
         "quick": {"material": QUICK_MATERIAL, "fill_mass": 28.0, "lift_speed": 0.2, "lift_to": 0.30, "max_time_after_lift": 4.0,
@@ -142,6 +143,7 @@ class BaffleBox(Experiment):
                               box=((dm, self.box_length - dm), (dm, self.box_width - dm)), h=h, z_min=dm,
                               top_margin=self.density_top_margin)
             out[w]["bulk_density"] = rho
+            out[w]["observables"] = {"bulk_density": rho}
         # lift the baffle in +z at lift_speed until its bottom edge is at lift_to (spec A "Protocol")
         ctx.jump_clock(t_motion)
         ctx.advance("lift", self.lift_duration, box)

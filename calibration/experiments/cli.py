@@ -8,6 +8,8 @@ Config (SI units; see calibration/configs/quick_*.yaml)::
     device: cpu                   # optional (default: Warp's default device)
     output: results/quick_baffle  # optional (default: experiment_<name>_<scale>)
     material: {type: spheres, diameter: [0.024, 0.030]}   # optional
+    contact_law: {rolling: epsd2, cohesion: sjkr}         # optional (default Hertz-Mindlin + epsd)
+    plugins: [my_effects.py]      # optional: files (relative to the config) of extra sub-models
     settings: {lift_speed: 0.2}   # optional: any setting of the experiment
     parameters:                   # one world per entry (or a mapping of equal-length lists)
       - {mu_s_pp: 0.3, mu_s_pw: 0.3, mu_r_pp: 0.05, mu_r_pw: 0.05}
@@ -27,8 +29,8 @@ from . import EXPERIMENTS, ExperimentResult, make_experiment
 
 __all__ = ["experiment_main", "load_config", "run_config", "plot_result"]
 
-CONFIG_KEYS = ("experiment", "scale", "device", "processes", "output", "material", "settings", "parameters",
-               "progress", "description")
+CONFIG_KEYS = ("experiment", "scale", "device", "processes", "output", "material", "contact_law", "plugins",
+               "settings", "parameters", "progress", "description")
 
 
 def load_config(path: str | os.PathLike) -> dict[str, Any]:
@@ -43,7 +45,9 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
         import yaml
 
         cfg = yaml.safe_load(text)
-    return check_config(cfg, str(p))
+    cfg = check_config(cfg, str(p))
+    cfg["_base_dir"] = str(p.parent)
+    return cfg
 
 
 def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
@@ -66,15 +70,23 @@ def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
         raise ConfigError(f"{source}: give 'material' either at the top level or in 'settings', not both")
     if "scale" in settings:
         raise ConfigError(f"{source}: put 'scale' at the top level, not in 'settings'")
+    for k in ("contact_law", "plugins"):
+        if k in settings:
+            raise ConfigError(f"{source}: put '{k}' at the top level, not in 'settings'")
     return dict(cfg)
 
 
 def run_config(cfg: Mapping[str, Any], device: str | None = None, progress: bool | None = None,
                processes: int | str | None = None) -> tuple[list[ExperimentResult], Any]:
     """Build the experiment of a checked config and run it; returns (results, experiment)."""
+    from ..model_description import ModelDescription
+
     settings = dict(cfg.get("settings") or {})
-    if cfg.get("material") is not None:
-        settings["material"] = cfg["material"]
+    model = ModelDescription.from_config(cfg, base_dir=cfg.get("_base_dir", "."))
+    if model.material is not None:
+        settings["material"] = model.material
+    settings["contact_law"] = model.contact_law
+    settings["plugins"] = model.plugins
     exp = make_experiment(cfg["experiment"], cfg.get("scale", "paper"), **settings)
     results = exp.run(cfg["parameters"], device=device or cfg.get("device"),
                       progress=bool(cfg.get("progress", False) if progress is None else progress),
@@ -213,7 +225,12 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
         if r.experiment == "drum" and r.ok:
             line["snapshot_std_deg"] = round(r.diagnostics["snapshot_std_deg"], 3)
         if r.experiment == "cylinder" and r.ok:
-            line["thetas_deg"] = [round(t, 3) for t in r.diagnostics["thetas_deg"]]
+            if r.diagnostics.get("no_pile"):
+                line["no_pile"] = r.diagnostics.get("no_pile_reason", True)
+            else:
+                line["thetas_deg"] = [round(t, 3) for t in r.diagnostics["thetas_deg"]]
+        if r.observables:
+            line["observables"] = {k: (None if v is None else round(v, 4)) for k, v in r.observables.items()}
         if not r.ok:
             line["error"] = r.error
         print(json.dumps(line))

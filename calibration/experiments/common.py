@@ -102,6 +102,10 @@ def _jsonable(x: Any) -> Any:
         return _jsonable(x.describe())
     if isinstance(x, wd.Material):
         return dataclasses.asdict(x)
+    if isinstance(x, wd.ContactLaw):
+        from ..model_description import contact_law_to_dict
+
+        return _jsonable(contact_law_to_dict(x))
     return x
 
 
@@ -122,6 +126,10 @@ class ExperimentResult:
     status: "ok" or "failed" (``error`` holds the message; a failed world is never dropped).
     angle_deg: the experiment's angle (``angle_name``: alpha_AoR_S, beta_AoR_D or gamma_s) [deg].
     bulk_density: fill bulk density [kg/m^3] where the spec asks for it (A), else None.
+    observables: every measured quantity of this world by name (units in the experiment's
+        ``OBSERVABLES``), e.g. ``static_angle`` [deg] and ``bulk_density`` [kg/m^3] (A),
+        ``dynamic_angle`` [deg] (B), ``pile_angle`` [deg], ``pile_height`` [m], ``pile_formed``
+        [1/0] (C; a material that spreads flat is an outcome: pile_formed 0, angle 0).
     diagnostics: fits, profile points, residuals, bin counts, snapshot spread, settling.
     timing: wall seconds, steps, simulated time [s] of the whole run (shared by its worlds).
     protocol: the experiment's settings, scale label and deviations from the paper scale.
@@ -139,6 +147,7 @@ class ExperimentResult:
     angle_name: str = ""
     angle_deg: float | None = None
     bulk_density: float | None = None
+    observables: dict[str, float | None] = field(default_factory=dict)
     diagnostics: dict[str, Any] = field(default_factory=dict)
     timing: dict[str, Any] = field(default_factory=dict)
     protocol: dict[str, Any] = field(default_factory=dict)
@@ -242,7 +251,11 @@ class Experiment:
 
     scale: "paper" (the spec's defaults) or "quick" (fewer, larger particles, shorter protocol;
         labelled in every result). material: a BulkMaterial (None: the scale's default).
-    rolling: rolling-resistance model of the contact law ("epsd" default, "cdt", "none").
+    contact_law: the :class:`warpdem.ContactLaw` (every sub-model), or a mapping such as
+        ``{rolling: epsd2, cohesion: sjkr}``; default Hertz-Mindlin + ``epsd`` rolling resistance.
+        It reaches the fills and the builder as it is (never rebuilt from a name).
+    plugins: user modules of sub-models / shape families loaded before the law was built (worker
+        processes load them again).
     contact_defaults: parameters applied to every world before its own set (spec "Default
         material": restitution 0.6 for all pairs).
     dt: time step [s] (None: ``warpdem.time_step_limits(model).recommended``); v_ref: impact
@@ -259,11 +272,14 @@ class Experiment:
 
     name: ClassVar[str] = "experiment"
     angle_name: ClassVar[str] = ""
+    #: observables a run reports -> unit; the first is the experiment's angle
+    OBSERVABLES: ClassVar[dict[str, str]] = {}
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {"paper": {}}
 
     scale: str = "paper"
     material: BulkMaterial | None = None
-    rolling: str = "epsd"
+    contact_law: wd.ContactLaw = field(default_factory=lambda: wd.ContactLaw(rolling="epsd"))
+    plugins: tuple[str, ...] = ()
     contact_defaults: dict[str, float] = field(default_factory=lambda: {"restitution_pp": 0.6, "restitution_pw": 0.6})
     dt: float | None = None
     v_ref: float = 2.0
@@ -321,7 +337,12 @@ class Experiment:
             raise ConfigError(f"{self.name}: max_neighbours must be >= 1 or null, got {self.max_neighbours}")
         if int(self.overflow_retries) < 0:
             raise ConfigError(f"{self.name}: overflow_retries must be >= 0, got {self.overflow_retries}")
-        wd.ContactLaw(rolling=self.rolling)  # raises a ConfigError for an unknown model
+        from ..model_description import contact_law_from_config, load_plugins
+
+        if isinstance(self.plugins, str):
+            self.plugins = (self.plugins,)
+        self.plugins = load_plugins(list(self.plugins)) if self.plugins else ()
+        self.contact_law = contact_law_from_config(self.contact_law, f"{self.name}: contact_law")
         if not isinstance(self.contact_defaults, Mapping):
             raise ConfigError(f"{self.name}: contact_defaults must be a mapping of parameter names to values")
         self.validate()
@@ -383,6 +404,15 @@ class Experiment:
             self._default_material = self.default_material()
         return self._default_material
 
+    def shape_parameter_names(self) -> list[str]:
+        """Shape parameters a parameter set may give (declared by the material's shape family)."""
+        return list(getattr(self.bulk_material(), "shape_parameters", None) or {})
+
+    @property
+    def parameter_names(self) -> list[str]:
+        """Every name a parameter set may hold: the law's contact parameters, then shape ones."""
+        return [*self.contact_law.parameter_names, *self.shape_parameter_names()]
+
     # ------------------------------------------------------------------ hooks
     def fill_region(self):
         raise NotImplementedError
@@ -410,7 +440,7 @@ class Experiment:
         if region.open_top:
             return random_fill(region, sample, rng)
         return pour_fill(region, sample, self.fill_walls, rng, device, self.ke_per_particle,
-                         self.fill_settle_max_time, rolling=self.rolling)
+                         self.fill_settle_max_time, contact_law=self.contact_law)
 
     def fill_settle_times(self, fills: list[FillResult]) -> tuple[float, float]:
         """(min_time, max_time) [s] of the fill's settling: at least the free-fall time of the
@@ -437,7 +467,9 @@ class Experiment:
         bounds = np.linspace(0, len(parameter_sets), nproc + 1).round().astype(int)
         chunks = [(int(a), parameter_sets[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
         ctx = multiprocessing.get_context("spawn")  # a clean interpreter: no inherited Warp/CUDA state
-        with concurrent.futures.ProcessPoolExecutor(max_workers=nproc, mp_context=ctx) as pool:
+        # the workers import the user's sub-model modules before they unpickle the experiment
+        with concurrent.futures.ProcessPoolExecutor(max_workers=nproc, mp_context=ctx, initializer=_load_worker_plugins,
+                                                    initargs=(tuple(self.plugins),)) as pool:
             futures = [pool.submit(_run_chunk, self, sets, device, start) for start, sets in chunks]
             parts = [f.result() for f in futures]
         wall = round(time.perf_counter() - wall0, 3)
@@ -461,7 +493,7 @@ class Experiment:
         if self.wall_material.name != material.particle.name:
             builder.add_material(self.wall_material)
         for w in range(nw):
-            add_fill(builder, fills[w if self.fill_per_world else 0], material.particle.name, w)
+            add_fill(builder, fills[w if len(fills) > 1 else 0], material.particle.name, w)
         self.add_walls(builder, max(f.top for f in fills), t_motion, material)
         if defaults:
             builder.set_contact_parameters(**defaults)
@@ -497,14 +529,21 @@ class Experiment:
              progress: bool) -> list[ExperimentResult]:
         """:meth:`run` in this process."""
         wall0 = time.perf_counter()
-        law = wd.ContactLaw(rolling=self.rolling)
-        sets = normalize_parameter_sets(parameter_sets, law.parameter_names)
+        law = self.contact_law
+        material = self.bulk_material()
+        shape_names = list(self.shape_parameter_names())
+        sets = normalize_parameter_sets(parameter_sets, [*law.parameter_names, *shape_names])
         defaults = normalize_parameter_sets([self.contact_defaults], law.parameter_names)[0]
         nw = len(sets)
-        material = self.bulk_material()
-        if self.fill_per_world:
-            fills = [self.make_fill(material, np.random.default_rng([self.seed, self.first_fill_index + w]), device)
-                     for w in range(nw)]
+        # shape parameters make a material per world; contact parameters go to the builder
+        shapes = [{k: s.pop(k) for k in shape_names if k in s} for s in sets]
+        materials = [material.with_shape_parameters(**sh) if sh else material for sh in shapes]
+        per_world = self.fill_per_world or len(set(map(_material_key, materials))) > 1
+        if per_world:
+            # a world's own fill: index first_fill_index + w (fill_per_world), else the shared seed
+            fills = [self.make_fill(materials[w], np.random.default_rng(
+                [self.seed, self.first_fill_index + w] if self.fill_per_world else self.seed), device)
+                for w in range(nw)]
         else:
             fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
         _, t_motion = self.fill_settle_times(fills)
@@ -552,7 +591,7 @@ class Experiment:
                   "max_contacts": int(model.max_contacts), "max_neighbours": int(sim.solver.max_neighbours),
                   "retries": retries, "note": "timing is for the whole run (all worlds together, retries included)"}
         protocol = {"scale": self.scale, "settings": self.settings(), "deviations_from_paper": self.deviations_from_paper(),
-                    "contact_law": law.describe(), "t_motion_start_s": t_motion,
+                    "contact_law": law.describe(), "material": material.describe(), "t_motion_start_s": t_motion,
                     "fill": {"particles_per_world": int(fills[0].sample.n),
                              "mass_per_world_kg": round(fills[0].sample.total_mass, 6),
                              "loose_top_m": round(max(f.top for f in fills), 6),
@@ -561,7 +600,7 @@ class Experiment:
         results = []
         for w in range(nw):
             cp = {n: float(model.get_contact_parameter(n)[w]) for n in model.parameter_names}
-            r = ExperimentResult(self.name, self.scale, w, sets[w], cp, angle_name=self.angle_name,
+            r = ExperimentResult(self.name, self.scale, w, {**sets[w], **shapes[w]}, cp, angle_name=self.angle_name,
                                  diagnostics=ctx.diag[w], timing=timing, protocol=protocol)
             o = outcome[w] if w < len(outcome) else {}
             r.fit = o.get("fit")
@@ -575,9 +614,22 @@ class Experiment:
                 r.fail("no angle was measured")
             else:
                 r.angle_deg = float(o["angle"])
+                obs = {k: None for k in self.OBSERVABLES}
+                if self.OBSERVABLES:
+                    obs[next(iter(self.OBSERVABLES))] = r.angle_deg
+                obs.update(o.get("observables") or {})
+                r.observables = {k: (None if v is None else float(v)) for k, v in obs.items()}
             results.append(r)
         ctx.log("done: " + ", ".join(f"w{r.world}={r.angle_deg:.2f}" if r.ok else f"w{r.world}=failed" for r in results))
         return results
+
+
+def _material_key(m: BulkMaterial) -> Any:
+    """Identity of a material's particle description (materials equal by value compare equal)."""
+    try:
+        return hash(m)
+    except TypeError:
+        return id(m)
 
 
 def cpu_processes(processes: int | str | None, device: str | None) -> int:
@@ -599,6 +651,14 @@ def cpu_processes(processes: int | str | None, device: str | None) -> int:
         if n < 1:
             raise ConfigError(f"processes must be >= 1 or 'auto', got {processes}")
     return 1 if str(dev).startswith("cuda") else n
+
+
+def _load_worker_plugins(plugins: tuple[str, ...]) -> None:
+    """Pool initializer: import the plugin modules a contact law names."""
+    if plugins:
+        from ..model_description import load_plugins
+
+        load_plugins(list(plugins))
 
 
 def _run_chunk(exp: Experiment, parameter_sets: list, device: str | None, first_world: int) -> list[ExperimentResult]:

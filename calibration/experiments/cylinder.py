@@ -18,6 +18,14 @@ from .common import Experiment, RunContext, fit_to_dict, rectangle
 
 __all__ = ["HollowCylinder"]
 
+
+def _pile_height(x: np.ndarray, r: np.ndarray, d_mean: float) -> float:
+    """Highest particle top [m] above the plate within one mean diameter of the axis (0 if none)."""
+    if len(x) == 0:
+        return 0.0
+    near = np.hypot(x[:, 0], x[:, 1]) < max(d_mean, 1e-9) * 1.5
+    return float((x[near, 2] + r[near]).max()) if np.any(near) else 0.0
+
 QUICK_CYLINDER_MATERIAL = BulkMaterial.spheres(0.014, 0.018, name="quick spheres d=14-18 mm")
 
 
@@ -33,12 +41,16 @@ class HollowCylinder(Experiment):
     ``max_time_after_lift`` [s] after the lift ended (the spec gives no limit; this is the
     config's). Particles off the plate or below ``removal_z`` are removed.
     Measurement: four half-profiles, ``bin_width`` bins, fit band ``band`` x peak height.
+    "No pile" is an outcome, not a failure: when the peak height near the axis is below
+    ``min_pile_layers`` mean particle diameters (the material spread to one or two layers), the
+    world reports ``pile_formed`` 0, ``pile_angle`` 0 deg and the measured ``pile_height``.
     Scale "quick": spheres d = 14-18 mm, 5 kg in a 150 mm cylinder, lift at 0.1 m/s (paper
     0.01 m/s), at most 3 s after.
     """
 
     name: ClassVar[str] = "cylinder"
     angle_name: ClassVar[str] = "gamma_s"
+    OBSERVABLES: ClassVar[dict[str, str]] = {"pile_angle": "deg", "pile_height": "m", "pile_formed": "1/0"}
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
         "paper": {},
         # smaller spheres in a narrower cylinder than the box/drum quick scale: with 24-30 mm spheres
@@ -60,10 +72,11 @@ class HollowCylinder(Experiment):
     band: tuple[float, float] = (0.20, 0.80)
     min_bins: int = 3
     removal_z: float = -0.050
+    min_pile_layers: float = 2.0
 
     def validate(self) -> None:
         self._check_positive("diameter", "height", "plate_size", "fill_mass", "lift_speed", "bin_width")
-        self._check_nonnegative("max_time_after_lift")
+        self._check_nonnegative("max_time_after_lift", "min_pile_layers")
         for name in ("level_height", "lift_clearance"):
             if getattr(self, name) is not None:
                 self._check_positive(name)
@@ -128,11 +141,19 @@ class HollowCylinder(Experiment):
             xs, rs = ctx.world_spheres(w, x_all)
             out[w]["particles"] = (xs.astype(np.float32), rs.astype(np.float32))
             d_mean = float(np.mean(ctx.fill(w).sample.equivalent_diameter))
+            peak = _pile_height(xs, rs, d_mean)
+            ctx.diag[w].update(peak_height_m=peak, mean_diameter_m=d_mean)
+            if peak < float(self.min_pile_layers) * d_mean:
+                out[w].update(angle=0.0, observables={"pile_height": peak, "pile_formed": 0.0})
+                ctx.diag[w].update(no_pile=True, no_pile_reason=f"peak height {peak * 1e3:.1f} mm < "
+                                   f"{self.min_pile_layers:g} mean diameters ({d_mean * 1e3:.1f} mm)")
+                continue
             res = ctx.measure(w, "gamma_s", cylinder_pile_angle, xs, rs, d_mean, axis_xy=(0.0, 0.0),
                               bin_width=self.bin_width, band=self.band, min_bins=int(self.min_bins))
             if res is None:
                 continue
-            out[w].update(angle=res.gamma_s_deg, fit=res)
+            out[w].update(angle=res.gamma_s_deg, fit=res,
+                          observables={"pile_height": res.peak_height, "pile_formed": 1.0})
             ctx.diag[w].update(thetas_deg=res.thetas_deg, halves=list(CylinderPileResult.HALVES),
                                peak_height_m=res.peak_height, mean_diameter_m=d_mean,
                                fits={h: fit_to_dict(f) for h, f in zip(CylinderPileResult.HALVES, res.fits)})

@@ -76,6 +76,7 @@ class RotatingDrum(Experiment):
 
     name: ClassVar[str] = "drum"
     angle_name: ClassVar[str] = "beta_AoR_D"
+    OBSERVABLES: ClassVar[dict[str, str]] = {"dynamic_angle": "deg"}
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
         "paper": {},
         "short": {"discard": 2, "record": 4},
@@ -128,8 +129,7 @@ class RotatingDrum(Experiment):
     def _run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None,
              progress: bool) -> list[ExperimentResult]:
         """As :meth:`Experiment.run`; a parameter set may also give the world's ``rpm``."""
-        law = wd.ContactLaw(rolling=self.rolling)
-        sets = normalize_parameter_sets(parameter_sets, [*law.parameter_names, "rpm"])
+        sets = normalize_parameter_sets(parameter_sets, [*self.parameter_names, "rpm"])
         rpms = [float(s.pop("rpm", self.rpm)) for s in sets]
         for w, v in enumerate(rpms):
             if not v > 0:
@@ -139,7 +139,7 @@ class RotatingDrum(Experiment):
             results = super()._run(sets, device, progress)
         finally:
             self._world_rpm = None
-        given = normalize_parameter_sets(parameter_sets, [*law.parameter_names, "rpm"])
+        given = normalize_parameter_sets(parameter_sets, [*self.parameter_names, "rpm"])
         for r, g in zip(results, given):
             if "rpm" in g:
                 r.parameters["rpm"] = g["rpm"]

@@ -1,0 +1,133 @@
+"""settled-bed benchmark (../shared/spec/benchmarks.md): the engine's reference case.
+
+N monodisperse spheres d = 18 mm, rho = 2661, E = 1e7 Pa, nu = 0.3, e = 0.6, mu_s = 0.5,
+mu_r = 0.1 (EPSD), dt = 5e-5 s, box 0.6 x 0.6 m (widened in x, y at the same depth for
+larger N, or W worlds of N each). Pour from a loose lattice, settle until KE per particle
+< 1e-6 J, then time 2000 steps after 200 warm-up steps. One JSON line per run.
+
+    python benchmarks/settled_bed.py --spheres 20000 --device cpu
+    python benchmarks/settled_bed.py --spheres 1000000 --device cuda
+    python benchmarks/settled_bed.py --spheres 20000 --worlds 50 --device cuda
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import time
+
+import numpy as np
+import warp as wp
+
+import warpdem as wd
+from warpdem import geometry
+
+D = 0.018
+R = D / 2
+
+
+def loose_fill(n: int, width: float, rng: np.random.Generator, spacing: float = 1.06 * D) -> np.ndarray:
+    """Jittered cubic lattice of n centres filling a width x width column from the floor up."""
+    per_row = int((width - D) // spacing)
+    per_layer = per_row * per_row
+    layers = math.ceil(n / per_layer)
+    ix, iy, iz = np.meshgrid(np.arange(per_row), np.arange(per_row), np.arange(layers), indexing="ij")
+    pts = np.stack([ix.ravel(), iy.ravel(), iz.ravel()], 1)
+    pts = pts[np.lexsort((pts[:, 1], pts[:, 0], pts[:, 2]))][:n]
+    pos = (pts + 0.5) * spacing + np.array([R, R, R])
+    jitter = (spacing - D) / 2 * 0.9
+    return pos + rng.uniform(-jitter, jitter, pos.shape)
+
+
+def morton_order(pos: np.ndarray, cell: float) -> np.ndarray:
+    """Indices sorting points along a Z-order (Morton) curve of cells of size ``cell``."""
+    c = np.floor((pos - pos.min(0)) / cell).astype(np.uint64)
+    code = np.zeros(len(pos), dtype=np.uint64)
+    for bit in range(21):
+        for axis in range(3):
+            code |= ((c[:, axis] >> np.uint64(bit)) & np.uint64(1)) << np.uint64(3 * bit + axis)
+    return np.argsort(code, kind="stable")
+
+
+def build(n: int, worlds: int, rolling: str, device: str, max_contacts: int, order: str = "morton"):
+    law = wd.ContactLaw(rolling=rolling)
+    b = wd.ModelBuilder(num_worlds=worlds, contact_law=law, max_contacts=max_contacts)
+    b.add_material(wd.Material("bed", 1.0e7, 0.3, 2661.0))
+    width = 0.6 * max(1.0, math.sqrt(n / 20000.0))  # same depth as the 20k case
+    rng = np.random.default_rng(0)
+    pos = loose_fill(n, width, rng)
+    if order == "morton":  # memory order follows space: neighbours share cache lines
+        pos = pos[morton_order(pos, D)]
+    for w in range(worlds):
+        b.add_spheres(pos, R, "bed", world=w)
+    b.add_wall(geometry.open_box((0, 0, 0), (width, width, pos[:, 2].max() + D)), "bed")
+    params = dict(restitution_pp=0.6, restitution_pw=0.6, mu_s_pp=0.5, mu_s_pw=0.5)
+    if rolling != "none":
+        params.update(mu_r_pp=0.1, mu_r_pw=0.1)
+    b.set_contact_parameters(**params)
+    return b.finalize(device, check_overlaps=n * worlds <= 200_000), width
+
+
+def settle_and_time(sim: wd.Simulation, device: str, settle_time: float, warmup: int, steps: int,
+                    min_time: float = 0.3) -> tuple[float, float, float]:
+    """The case's protocol: settle (KE per body < 1e-6 J or ``settle_time`` simulated seconds), run
+    ``warmup`` steps, time ``steps`` steps. Returns (settling sim time, settling wall s, timed wall s)."""
+    t0 = time.perf_counter()
+    settle_sim_time = sim.settle(ke_per_particle=1e-6, max_time=settle_time, check_interval=0.05,
+                                 min_time=min(min_time, settle_time)).time
+    t_settle = time.perf_counter() - t0
+    sim.run(warmup)
+    wp.synchronize_device(device)
+    t0 = time.perf_counter()
+    sim.run(steps, check_every=steps)
+    wp.synchronize_device(device)
+    return settle_sim_time, t_settle, time.perf_counter() - t0
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--spheres", type=int, default=20000, help="spheres per world")
+    ap.add_argument("--worlds", type=int, default=1)
+    ap.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
+    ap.add_argument("--rolling", default="epsd", choices=["none", "cdt", "epsd"])
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--warmup", type=int, default=200)
+    ap.add_argument("--settle-time", type=float, default=3.0, help="max simulated settling time [s]")
+    ap.add_argument("--max-contacts", type=int, default=12)
+    ap.add_argument("--no-graph", action="store_true")
+    ap.add_argument("--conditional-rebuild", action="store_true", help="skip the grid build on steps without a list rebuild")
+    ap.add_argument("--order", default="morton", choices=["morton", "lattice"], help="memory order of the spheres")
+    args = ap.parse_args(argv)
+    wp.config.quiet = True
+    device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
+    t0 = time.perf_counter()
+    model, width = build(args.spheres, args.worlds, args.rolling, device, args.max_contacts, args.order)
+    sim = wd.Simulation(model, 5.0e-5, use_graph=None if not args.no_graph else False, steps_per_graph=50,
+                        conditional_rebuild=args.conditional_rebuild)
+    t_build = time.perf_counter() - t0
+    settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps)
+    ke = sim.kinetic_energy() / args.spheres
+    counts = sim.state.contact_count.numpy()
+    n_total = args.spheres * args.worlds
+    result = dict(
+        case="settled-bed", device=str(wp.get_device(device)), device_name=wp.get_device(device).name,
+        host=platform.node(), spheres=args.spheres, worlds=args.worlds, total_spheres=n_total, steps=args.steps,
+        seconds=round(seconds, 4), sphere_steps_per_s=float(f"{n_total * args.steps / seconds:.4g}"),
+        contacts_per_sphere=round(float(counts.mean()), 3), rolling=args.rolling, dt=5e-5,
+        box_width_m=round(width, 4), settle_sim_time_s=round(settle_sim_time, 3), settle_wall_s=round(t_settle, 1),
+        ke_per_particle_J=float(f"{ke.max():.3g}"), build_s=round(t_build, 1), warp=wp.config.version,
+        graph=sim.use_graph, order=args.order, conditional_rebuild=args.conditional_rebuild,
+        list_builds=int(sim.solver.list_builds.numpy()[0]), date=time.strftime("%Y-%m-%d"))
+    print(json.dumps(result), flush=True)
+    return result
+
+
+def cli_main(argv: list[str] | None = None) -> int:
+    """``warpdem bench``: run :func:`main`, exit code 0."""
+    main(argv)
+    return 0
+
+
+if __name__ == "__main__":
+    main()
