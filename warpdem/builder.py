@@ -47,6 +47,7 @@ class ModelBuilder:
         self._num_bodies = 0
         self._num_spheres = 0
         self.walls: list[Wall] = []
+        self.body_forces: list = []
         specs = self.contact_law.specs
         self.contact_params = np.zeros((2 * self.num_worlds, len(specs)), dtype=np.float64)
         for col, spec in enumerate(specs.values()):
@@ -246,6 +247,17 @@ class ModelBuilder:
                                tri_offset=offset, triangle_labels=triangle_labels, label_names=tuple(label_names)))
         return len(self.walls) - 1
 
+    # ------------------------------------------------------------------ body forces
+    def add_body_force(self, model) -> None:
+        """Add a body-force model (an instance of a :class:`warpdem.body_forces.BodyForceModel`
+        subclass, e.g. ``UniformFluid(viscosity=1e-3)``); the solver adds its force to every
+        active body each step, after the contacts and before the integration."""
+        from .body_forces import BodyForceModel
+
+        if not isinstance(model, BodyForceModel):
+            raise ConfigError(f"add_body_force needs a BodyForceModel instance, got {type(model).__name__}")
+        self.body_forces.append(model)
+
     # ------------------------------------------------------------------ finalize
     @property
     def num_spheres(self) -> int:
@@ -277,7 +289,7 @@ class ModelBuilder:
         host["contact_params"] = self.contact_params.astype(np.float32)
         host["num_worlds"] = np.array(self.num_worlds)
         return Model(host, self.walls, self.materials, self.contact_law, initial, device=device,
-                     max_contacts=self.max_contacts, gravity=self.gravity)
+                     max_contacts=self.max_contacts, gravity=self.gravity, body_forces=self.body_forces)
 
     def _check_overlaps(self, host: dict, tol: float) -> None:
         from scipy.spatial import cKDTree

@@ -89,8 +89,10 @@ class Model:
 
     def __init__(self, host: dict, walls: list[Wall], materials: list[Material], law: ContactLaw,
                  initial: dict, device: str | None = None, max_contacts: int = 16,
-                 gravity=(0.0, 0.0, -9.81)) -> None:
+                 gravity=(0.0, 0.0, -9.81), body_forces=()) -> None:
         self.device = wp.get_device(device)
+        # body-force models (warpdem.body_forces), launched by the solver before integration
+        self.body_forces = tuple(body_forces)
         self.host = {k: np.ascontiguousarray(v) for k, v in host.items()}
         self.initial = {k: np.ascontiguousarray(v) for k, v in initial.items()}
         self.materials = list(materials)

@@ -124,6 +124,16 @@ class DEMSolver:
         self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
         self.kernel = kernels.contact_kernel(model.contact_law)
         self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
+        # body-force models (warpdem.body_forces): launched after the contacts, summed into one
+        # per-body force that the integrator adds (with the external force, if used)
+        self.body_forces = tuple(getattr(model, "body_forces", ()))
+        self.body_force_context = None
+        if self.body_forces:
+            from .body_forces import BodyForceContext
+
+            self.body_force_context = BodyForceContext(self)
+            for bf in self.body_forces:
+                bf.bind(self.body_force_context)
 
     # ---------------------------------------------------------------- step
     def step(self, state_in: State, state_out: State, dt: float | None = None) -> None:
@@ -146,14 +156,29 @@ class DEMSolver:
         else:
             self._build_neighbour_list(state_in)
         self.launch_contacts(state_in, state_out, dt)
+        f_ext, use_ext = self.external_force, self.use_external_force
+        if self.body_forces:
+            f_ext, use_ext = self.apply_body_forces(state_in, state_out, dt), True
         wp.launch(kernels.integrate_bodies, dim=m.num_bodies, inputs=[
             m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
-            self.external_force, int(self.use_external_force), wp.vec3(*m.gravity), dt,
+            f_ext, int(use_ext), wp.vec3(*m.gravity), dt,
             state_in.body_active, state_in.body_q, state_in.body_rot, state_in.body_v, state_in.body_w,
             state_out.body_active, state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
             self.world_paused, self.bad], device=d)
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
 
+
+    def apply_body_forces(self, state_in: State, state_out: State, dt: float) -> wp.array:
+        """Per-body force [N] of the body-force models for this step (device only, capturable):
+        starts from the external force (if used) or zero, each model adds its part."""
+        ctx = self.body_force_context
+        if self.use_external_force:
+            wp.copy(ctx.force, self.external_force)
+        else:
+            ctx.force.zero_()
+        for bf in self.body_forces:
+            bf.launch(ctx, state_in, state_out, dt)
+        return ctx.force
 
     def place_spheres(self, state: State) -> None:
         """Sphere positions (``state.sphere_x``) and packed views from the body poses."""
