@@ -1,0 +1,210 @@
+"""The DEM as the diagnosis's forward model: every design of one experiment in one launch.
+
+:class:`DEMForwardModel` answers ``evaluate(effects, parameter_sets, replicates, keys)`` by running
+the standard experiments (:mod:`calibration.experiments`) with the model description of the base
+plus the effects switched on. Observables of one experiment that differ only in the drum speed
+share one run (the speed is a per-world setting); each (parameter set, replicate) is a world with
+its own loose fill. World results are cached in a JSONL file keyed by a fingerprint of the model,
+the experiment settings, the parameters and the replicate index, so an interrupted or repeated
+diagnosis (or a second measurement set against the same designs) never repeats a DEM run. The
+cache holds simulations only, never measurements.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from calibration.experiments import EXPERIMENTS, make_experiment
+from calibration.materials import BulkMaterial
+from calibration.model_description import ModelDescription
+from warpdem import ConfigError
+
+from .dem_effects import DEMEffect, apply_effects
+from .forward import ForwardModel, ProposedMeasurement
+
+__all__ = ["ObservableSpec", "DEMForwardModel"]
+
+#: fill index blocks: design worlds draw fills from here upwards (a lab-data generator uses others)
+DESIGN_FILLS = 10_000_000
+
+
+@dataclass(frozen=True)
+class ObservableSpec:
+    """What the DEM must simulate for one observable key: experiment, quantity, settings."""
+
+    key: str
+    experiment: str
+    quantity: str
+    settings: Mapping[str, Any] = field(default_factory=dict)
+
+
+def _fingerprint(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:20]
+
+
+class DEMForwardModel(ForwardModel):
+    """Runs the standard experiments for the diagnosis.
+
+    Args:
+        base: the base model description (contact law, material or None, plugins).
+        base_material: the material when ``base.material`` is None (e.g. the measurement file's).
+        effects: the candidate effects by name (switched on by name in :meth:`evaluate`).
+        observables: every key the diagnosis may ask for (measured and proposed).
+        scale: experiment preset ("paper", "quick"; drum also "short"), per experiment in
+            ``experiment_settings[exp]["scale"]`` if given.
+        experiment_settings: per experiment, settings applied to every condition (e.g. shorter
+            protocol), overridden by the condition's own settings.
+        fixed: contact parameters applied to every world (e.g. restitution).
+        cache: JSONL file of world results (None: no cache).
+    """
+
+    def __init__(self, base: ModelDescription, base_material: BulkMaterial, effects: Sequence[DEMEffect],
+                 observables: Sequence[ObservableSpec], scale: str = "paper",
+                 experiment_settings: Mapping[str, Mapping[str, Any]] | None = None,
+                 fixed: Mapping[str, float] | None = None, device: str | None = None,
+                 processes: int | str | None = "auto", cache: str | Path | None = None,
+                 progress: bool = False, proposals: Sequence[ProposedMeasurement] = ()) -> None:
+        self.base = base
+        self.base_material = base_material
+        self.effects = {e.name: e for e in effects}
+        self.observables = {o.key: o for o in observables}
+        for o in observables:
+            if o.experiment not in EXPERIMENTS:
+                raise ConfigError(f"observable {o.key}: unknown experiment {o.experiment!r}; valid: {sorted(EXPERIMENTS)}")
+            if o.quantity not in EXPERIMENTS[o.experiment].OBSERVABLES:
+                raise ConfigError(f"observable {o.key}: the {o.experiment} experiment does not report "
+                                  f"{o.quantity!r}; it reports {list(EXPERIMENTS[o.experiment].OBSERVABLES)}")
+        self.scale = scale
+        self.experiment_settings = {k: dict(v) for k, v in (experiment_settings or {}).items()}
+        self.fixed = dict(fixed or {})
+        self.device = device
+        self.processes = processes
+        self.progress = progress
+        self._proposals = tuple(proposals)
+        self.cache_path = Path(cache) if cache is not None else None
+        self._cache: dict[str, dict[str, Any]] = {}
+        self.dem_seconds = 0.0
+        self.dem_worlds = 0
+        self.log: list[dict[str, Any]] = []
+        if self.cache_path is not None and self.cache_path.exists():
+            for line in self.cache_path.read_text().splitlines():
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:  # a torn last line from an interrupted run: re-run it
+                    continue
+                self._cache[rec["id"]] = rec
+
+    # ------------------------------------------------------------------ helpers
+    def description(self, effects: Sequence[str]) -> ModelDescription:
+        unknown = [e for e in effects if e not in self.effects]
+        if unknown:
+            raise ConfigError(f"unknown effect(s) {unknown}; this forward model knows {sorted(self.effects)}")
+        return apply_effects(self.base, [self.effects[e] for e in effects], self.base_material)
+
+    def proposals(self) -> Sequence[ProposedMeasurement]:
+        return self._proposals
+
+    def _experiment(self, name: str, settings: Mapping[str, Any], desc: ModelDescription, first_fill: int):
+        extra = dict(self.experiment_settings.get(name, {}))
+        scale = extra.pop("scale", self.scale)
+        kw = {**extra, **{k: v for k, v in settings.items() if k != "rpm"}}
+        material = desc.material or self.base_material
+        return make_experiment(name, scale, contact_law=desc.contact_law, plugins=desc.plugins, material=material,
+                               fill_per_world=True, first_fill_index=first_fill, **kw)
+
+    def _world_id(self, model_fp: str, exp_fp: str, params: Mapping[str, float], rep: int, rpm: float | None) -> str:
+        return _fingerprint([model_fp, exp_fp, {k: round(float(v), 12) for k, v in sorted(params.items())}, rep, rpm])
+
+    def _store(self, rec: dict[str, Any]) -> None:
+        self._cache[rec["id"]] = rec
+        if self.cache_path is not None:
+            self.cache_path.parent.mkdir(parents=True, exist_ok=True)
+            with open(self.cache_path, "a") as fh:
+                fh.write(json.dumps(rec) + "\n")
+
+    # ------------------------------------------------------------------ evaluate
+    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
+                 keys: Sequence[str]) -> np.ndarray:
+        out = np.full((len(parameter_sets), replicates, len(keys)), np.nan)
+        desc = self.description(effects)
+        model_fp = _fingerprint(desc.describe())
+        shape_names = set(desc.shape_specs(desc.material))
+        # group keys by (experiment, settings without rpm): one run each, rpm per world
+        groups: dict[tuple[str, str], list[int]] = {}
+        for k_i, key in enumerate(keys):
+            if key not in self.observables:
+                raise ConfigError(f"the DEM forward model has no observable '{key}'")
+            o = self.observables[key]
+            settings = {k: v for k, v in o.settings.items() if k != "rpm"}
+            groups.setdefault((o.experiment, json.dumps(settings, sort_keys=True, default=str)), []).append(k_i)
+        for (exp_name, settings_json), k_idx in groups.items():
+            settings = json.loads(settings_json)
+            rpms = sorted({self.observables[keys[k]].settings.get("rpm") for k in k_idx},
+                          key=lambda v: -1 if v is None else float(v))
+            exp_fp = _fingerprint([exp_name, self.scale, self.experiment_settings.get(exp_name, {}), settings,
+                                   self.fixed])
+            todo: list[tuple[int, int, Any, str]] = []
+            for i, ps in enumerate(parameter_sets):
+                for r in range(replicates):
+                    for rpm in rpms:
+                        wid = self._world_id(model_fp, exp_fp, ps, r, rpm)
+                        if wid not in self._cache:
+                            todo.append((i, r, rpm, wid))
+            if todo:
+                self._run_worlds(exp_name, settings, desc, parameter_sets, todo, shape_names)
+            for i, ps in enumerate(parameter_sets):
+                for r in range(replicates):
+                    for k in k_idx:
+                        o = self.observables[keys[k]]
+                        rec = self._cache[self._world_id(model_fp, exp_fp, ps, r, o.settings.get("rpm"))]
+                        v = (rec.get("observables") or {}).get(o.quantity)
+                        out[i, r, k] = np.nan if v is None or rec.get("status") != "ok" else float(v)
+        return out
+
+    def _run_worlds(self, exp_name: str, settings: Mapping[str, Any], desc: ModelDescription,
+                    parameter_sets: Sequence[Mapping[str, float]], todo: list, shape_names: set[str]) -> None:
+        """Run the missing worlds of one experiment in one launch and cache their observables."""
+        first_fill = DESIGN_FILLS + len(self._cache) + 1000 * len(self.log)
+        exp = self._experiment(exp_name, settings, desc, first_fill)
+        sets = []
+        for i, r, rpm, _ in todo:
+            s = {**self.fixed, **{k: float(v) for k, v in parameter_sets[i].items()}}
+            if rpm is not None:
+                s["rpm"] = float(rpm)
+            sets.append(s)
+        t0 = time.perf_counter()
+        results = exp.run(sets, device=self.device, progress=self.progress, processes=self.processes)
+        wall = time.perf_counter() - t0
+        self.dem_seconds += wall
+        self.dem_worlds += len(sets)
+        self.log.append({"experiment": exp_name, "settings": dict(settings), "worlds": len(sets),
+                         "wall_s": round(wall, 2), "model": desc.contact_law.describe(),
+                         "material": (desc.material or self.base_material).name})
+        for (i, r, rpm, wid), res in zip(todo, results):
+            self._store({"id": wid, "experiment": exp_name, "status": res.status, "error": res.error,
+                         "parameters": dict(parameter_sets[i]), "replicate": r, "rpm": rpm,
+                         "observables": res.observables, "fill_index": first_fill + res.world})
+
+
+def condition_settings(experiment: str, condition: Mapping[str, Any]) -> dict[str, Any]:
+    """The settings of a measured condition that the experiment knows (rpm for the drum is a
+    per-world setting); unknown names are an error naming them."""
+    cls = EXPERIMENTS[experiment]
+    known = set(cls.field_names()) | ({"rpm"} if experiment == "drum" else set())
+    bad = sorted(set(condition) - known)
+    if bad:
+        raise ConfigError(f"{experiment}: condition setting(s) {bad} are not settings of the experiment; "
+                          f"valid: {sorted(known)}")
+    out = {}
+    for k, v in condition.items():
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigError(f"{experiment}: condition setting {k} must be finite, got {v}")
+        out[k] = v
+    return out

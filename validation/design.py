@@ -1,0 +1,96 @@
+"""Stage 1: a space-filling design, its batched evaluation, and the DEM noise from replicates.
+
+The design is a Latin hypercube over the parameter box (:func:`calibration.designs.latin_hypercube`,
+scipy.stats.qmc).  Every set runs ``replicates`` independent fills in one forward-model call.
+The fill-to-fill noise of each observable is the pooled standard deviation over all sets,
+
+    s_p^2 = sum_k sum_r (y_kr - mean_k)^2 / sum_k (n_k - 1),
+
+the textbook pooled variance (e.g. Montgomery, *Design and Analysis of Experiments*, Sec. 2.4),
+which assumes the noise does not depend on the parameters.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from calibration.designs import latin_hypercube
+
+from .effects import ModelVersion
+from .forward import ForwardRunner
+
+__all__ = ["DesignData", "run_design", "pooled_noise_sd"]
+
+
+@dataclass(frozen=True)
+class DesignData:
+    """Parameter sets ``X`` (n, d; physical units) and responses ``Y`` (n, replicates, m), NaN = failed."""
+
+    X: np.ndarray
+    Y: np.ndarray
+    keys: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        X, Y = np.atleast_2d(np.asarray(self.X, float)), np.asarray(self.Y, float)
+        if Y.ndim != 3 or Y.shape[0] != X.shape[0] or Y.shape[2] != len(self.keys):
+            raise ValueError(f"design responses have shape {Y.shape}; expected ({X.shape[0]}, replicates, {len(self.keys)})")
+        object.__setattr__(self, "X", X)
+        object.__setattr__(self, "Y", Y)
+        object.__setattr__(self, "keys", tuple(self.keys))
+
+    def set_means(self) -> np.ndarray:
+        """Mean over the replicates of each set, shape (n, m); NaN where every replicate failed."""
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.nanmean(self.Y, axis=1)
+
+    def extended(self, other: "DesignData") -> "DesignData":
+        """This design followed by ``other`` (same keys; replicates may differ, padded with NaN)."""
+        if other.keys != self.keys:
+            raise ValueError(f"cannot join designs with different keys: {self.keys} vs {other.keys}")
+        r = max(self.Y.shape[1], other.Y.shape[1])
+
+        def pad(Y):
+            return np.concatenate([Y, np.full((Y.shape[0], r - Y.shape[1], Y.shape[2]), np.nan)], axis=1)
+
+        return DesignData(np.vstack([self.X, other.X]), np.concatenate([pad(self.Y), pad(other.Y)]), self.keys)
+
+
+def run_design(version: ModelVersion, runner: ForwardRunner, keys: Sequence[str], n_sets: int,
+               replicates: int, seed: int) -> DesignData:
+    """Latin hypercube of ``n_sets`` over ``version.space``, evaluated in one batched call."""
+    X = latin_hypercube(version.space, int(n_sets), seed=seed)
+    return evaluate_sets(version, runner, keys, X, replicates)
+
+
+def evaluate_sets(version: ModelVersion, runner: ForwardRunner, keys: Sequence[str], X: np.ndarray,
+                  replicates: int) -> DesignData:
+    """Evaluate given parameter sets ``X`` (physical units) in one batched call."""
+    X = np.atleast_2d(np.asarray(X, float))
+    Y = runner(version.effect_names, version.parameter_sets(X), replicates, tuple(keys))
+    return DesignData(X, Y, tuple(keys))
+
+
+def pooled_noise_sd(Y: np.ndarray, keys: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """Pooled fill-to-fill standard deviation per observable and its degrees of freedom.
+
+    Y : (n_sets, replicates, m), NaN ignored.  Returns ``(sd (m,), dof (m,))``.
+    Raises if an observable has no set with two successful replicates.
+    """
+    Y = np.asarray(Y, float)
+    ok = np.isfinite(Y)
+    n_k = ok.sum(axis=1)  # (n, m)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        mean_k = np.nanmean(Y, axis=1, keepdims=True)
+    ss = np.nansum(np.where(ok, (Y - mean_k) ** 2, 0.0), axis=(0, 1))
+    dof = np.sum(np.clip(n_k - 1, 0, None), axis=0)
+    if np.any(dof == 0):
+        bad = [keys[j] if j < len(keys) else str(j) for j in np.flatnonzero(dof == 0)]
+        raise ValueError(f"cannot measure the DEM fill-to-fill noise of {bad}: no parameter set has two successful "
+                         "replicates (use replicates >= 2)")
+    return np.sqrt(ss / dof), dof.astype(float)

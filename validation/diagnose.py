@@ -1,0 +1,364 @@
+"""The diagnosis: model versus measurement, the missing effect, and the error falling.
+
+:func:`diagnose` runs, in order (issue 11):
+
+1. the base model's study (:mod:`validation.study`: design, DEM noise, surrogates, best fit,
+   comparison, adequacy, evidence, DEM confirmation);
+2. if the base model is inadequate (or ``rank_when_adequate``), every candidate effect's
+   augmented study, ranked by Bayes factor with signature and sentence (:mod:`validation.ranking`);
+3. if the top candidates are tied (ln B gap < ``tie_log_bayes``), the forward model's proposed
+   conditions are forecast under each and the most separating one is named
+   (:mod:`validation.discrimination`);
+4. the chosen effect (the top candidate, or ``settings.add``) is recalibrated with a second
+   design wave and confirmed by DEM; the error history records every version
+   (:mod:`validation.history`); repeated up to ``max_added_effects`` times while inadequate.
+
+:class:`DiagnosisResult` holds every number; :meth:`DiagnosisResult.write` saves the JSON, the
+figures and the HTML report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from calibration.designs import ParameterSpace
+
+from .discrimination import Discrimination, discriminate
+from .effects import CandidateEffect, ModelVersion
+from .forward import ForwardModel, ForwardRunner
+from .history import ErrorHistory, VersionErrors, version_errors
+from .observables import Observable, Observations
+from .ranking import CandidateResult, candidate_sentence, effect_signature, rank_candidates
+from .settings import DiagnosisSettings
+from .study import ModelStudy, refine_study, study_model
+
+__all__ = ["RankingRound", "DiagnosisResult", "diagnose"]
+
+
+@dataclass(frozen=True)
+class RankingRound:
+    """The candidates tried on top of one model version, ranked; the tie, its discrimination, the choice."""
+
+    current: ModelStudy
+    candidates: tuple[CandidateResult, ...]
+    tied: tuple[str, ...]
+    discrimination: Discrimination | None
+    chosen: str | None
+    reason: str
+
+    @property
+    def top(self) -> CandidateResult:
+        return self.candidates[0]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"current_version": self.current.name, "candidates": [c.to_dict() for c in self.candidates],
+                "tied": list(self.tied), "discrimination": None if self.discrimination is None
+                else self.discrimination.to_dict(), "chosen": self.chosen, "reason": self.reason}
+
+
+@dataclass
+class DiagnosisResult:
+    """Everything a diagnosis found.
+
+    observations : the measurements.  settings : the settings used.
+    versions : studies of the model versions built in turn (``versions[0]`` is the base model).
+    rounds : one ranking round per attempt to add an effect.
+    history : error history across ``versions`` (DEM-confirmed residuals).
+    met : True when the final version has every observable within ``within_sigma`` (DEM).
+    headline, details : the verdict in words.  next_steps : what to do next.
+    forward : forward-model calls, runs, failed runs and seconds.  seconds : wall time per stage.
+    """
+
+    observations: Observations
+    settings: DiagnosisSettings
+    versions: list[ModelStudy]
+    rounds: list[RankingRound]
+    history: ErrorHistory
+    met: bool
+    headline: str
+    details: list[str]
+    next_steps: list[str]
+    forward: dict[str, Any]
+    seconds: dict[str, float]
+    candidates: tuple[CandidateEffect, ...] = field(default_factory=tuple)
+
+    @property
+    def base(self) -> ModelStudy:
+        return self.versions[0]
+
+    @property
+    def final(self) -> ModelStudy:
+        return self.versions[-1]
+
+    @property
+    def base_adequate(self) -> bool:
+        return self.base.adequacy.adequate
+
+    @property
+    def added_effects(self) -> tuple[str, ...]:
+        return self.final.version.effect_names
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable({
+            "verdict": {"met": self.met, "headline": self.headline, "details": self.details,
+                        "base_adequate": self.base_adequate, "added_effects": list(self.added_effects)},
+            "observables": [o.to_dict() for o in self.observations],
+            "candidates": [c.to_dict() for c in self.candidates],
+            "settings": self.settings.to_dict(),
+            "versions": [v.to_dict() for v in self.versions],
+            "rounds": [r.to_dict() for r in self.rounds],
+            "error_history": self.history.to_dict(),
+            "next_steps": self.next_steps, "forward_model": self.forward, "seconds": self.seconds,
+        })
+
+    def write(self, folder: str | os.PathLike) -> dict[str, Path]:
+        """Write ``diagnosis.json``, ``error_history.json``, the figures (PNG) and ``report.html``."""
+        from .plots import diagnosis_figures
+        from .report import build_report
+
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        paths: dict[str, Path] = {}
+        paths["json"] = out / "diagnosis.json"
+        paths["json"].write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False), encoding="utf-8")
+        paths["error_history_json"] = self.history.write(out / "error_history.json")
+        figures = diagnosis_figures(self)
+        import matplotlib.pyplot as plt
+
+        for name, fig in figures.items():
+            p = out / f"{name}.png"
+            fig.savefig(p, dpi=110, bbox_inches="tight")
+            plt.close(fig)
+            paths[name] = p
+        paths["report"] = build_report(self, {n: paths[n] for n in figures}).write(out / "report.html")
+        return paths
+
+
+def _jsonable(obj: Any) -> Any:
+    """Convert numpy types and non-finite floats (-> None) for strict JSON."""
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.bool_, bool)):
+        return bool(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def _errors(study: ModelStudy, settings: DiagnosisSettings) -> VersionErrors:
+    z = study.confirmation.z
+    return version_errors(study.name, study.version.effect_names, study.version.space.dim,
+                          study.misfit.observations.keys, z, settings.within_sigma)
+
+
+def _residual(study: ModelStudy) -> np.ndarray:
+    zc = study.confirmation.z
+    return np.where(np.isfinite(zc), zc, study.best.z)
+
+
+def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs: Observations, runner: ForwardRunner,
+                model: ForwardModel, settings: DiagnosisSettings, seed: int) -> RankingRound:
+    """Study every candidate on top of ``current``, rank, detect a tie and try to resolve it."""
+    labels = [o.name for o in obs]
+    z_now = _residual(current)
+    current_words = "base model" if not current.version.effects else f"model '{current.name}'"
+    results = []
+    for i, eff in enumerate(candidates):
+        st = study_model(current.version.with_effect(eff), obs, runner, settings, seed + 17 * (i + 1))
+        log_b = st.evidence.log_evidence - current.evidence.log_evidence
+        sig = effect_signature(current, st, eff, z_now)
+        z_after = np.where(np.isfinite(st.confirmation.z), st.confirmation.z, st.best.z)
+        sentence = candidate_sentence(eff, labels, z_now, z_after, log_b, settings.within_sigma, current_words)
+        results.append(CandidateResult(eff, st, log_b, sig, sentence))
+    ranked = rank_candidates(results)
+    top = ranked[0]
+    tied = tuple(c.name for c in ranked
+                 if top.log_evidence - c.log_evidence
+                 < max(settings.tie_log_bayes,
+                       2.0 * math.hypot(top.study.evidence.standard_error, c.study.evidence.standard_error)))
+    disc = None
+    if len(tied) >= 2:
+        by_name = {c.name: c for c in ranked}
+        disc = discriminate({n: by_name[n].study for n in tied}, {n: by_name[n].effect.words for n in tied},
+                            tuple(model.proposals()), runner, settings.replicates, settings.separation_sigma,
+                            seed=seed)
+    return RankingRound(current, ranked, tied, disc, None, "")
+
+
+def _check_inputs(observables, base_space, candidates, forward_model, settings) -> tuple[Observations, tuple]:
+    if isinstance(observables, Observations):
+        obs = observables
+    else:
+        obs = Observations(tuple(observables))
+    if not isinstance(base_space, ParameterSpace):
+        raise TypeError(f"base_space must be a calibration.designs.ParameterSpace, got {type(base_space).__name__}")
+    cands = tuple(candidates)
+    for c in cands:
+        if not isinstance(c, CandidateEffect):
+            raise TypeError(f"candidates must be CandidateEffect objects, got {type(c).__name__}")
+        ModelVersion(base_space, (c,))  # raises on a parameter-name clash
+    names = [c.name for c in cands]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"candidate effect names must be unique; duplicated: {dup}")
+    unknown = [a for a in settings.add if a not in names]
+    if unknown:
+        raise ValueError(f"settings.add names effects that are not candidates: {unknown}; candidates: {names}")
+    if not isinstance(forward_model, ForwardModel) and not callable(getattr(forward_model, "evaluate", None)):
+        raise TypeError(f"forward_model must implement validation.forward.ForwardModel, got {type(forward_model).__name__}")
+    return obs, cands
+
+
+def diagnose(observables: Sequence[Observable] | Observations, base_space: ParameterSpace,
+             candidates: Sequence[CandidateEffect], forward_model: ForwardModel,
+             settings: DiagnosisSettings | None = None) -> DiagnosisResult:
+    """Judge the base model against the measurements, rank the candidate effects, add the best.
+
+    observables : the measured observables (unique keys).
+    base_space : the base model's calibrated parameters and their ranges.
+    candidates : effects the base model may lack (their parameters must not clash with the base's).
+    forward_model : the simulator (:class:`validation.forward.ForwardModel`).
+    settings : :class:`validation.settings.DiagnosisSettings` (defaults if None).
+    """
+    settings = settings or DiagnosisSettings()
+    obs, cands = _check_inputs(observables, base_space, candidates, forward_model, settings)
+    # the surrogates solve many tiny systems: one BLAS thread is ~100x faster than a spinning pool there
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _diagnose(obs, base_space, cands, forward_model, settings)
+
+
+def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[CandidateEffect, ...],
+              forward_model: ForwardModel, settings: DiagnosisSettings) -> DiagnosisResult:
+    runner = ForwardRunner(forward_model)
+    t_start = time.perf_counter()
+    seconds: dict[str, float] = {}
+    base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed)
+    seconds["base_study"] = base.seconds
+    versions = [base]
+    history = ErrorHistory((_errors(base, settings),))
+    rounds: list[RankingRound] = []
+    remaining = list(cands)
+    forced = list(settings.add)
+    seconds["ranking"] = seconds["recalibration"] = 0.0
+    for step in range(max(settings.max_added_effects, len(forced))):
+        current = versions[-1]
+        inadequate = not current.adequacy.adequate
+        if not remaining or not (inadequate or forced or settings.rank_when_adequate):
+            break
+        t0 = time.perf_counter()
+        rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, settings.seed + 1000 * (step + 1))
+        seconds["ranking"] += time.perf_counter() - t0
+        top = rnd.top
+        if forced:
+            chosen, reason = forced.pop(0), "added as requested (settings.add)"
+        elif not inadequate:
+            chosen, reason = None, f"the {current.name} is adequate: no effect is needed"
+        elif top.log_bayes <= 0:
+            chosen, reason = None, (f"no candidate raises the evidence over the {current.name} "
+                                    f"(best: {top.effect.words}, ln B = {top.log_bayes:+.1f}): the missing effect is "
+                                    "not among the candidates")
+        elif len(rnd.tied) >= 2:
+            chosen = top.name
+            words = {c.name: c.effect.words for c in rnd.candidates}
+            reason = (f"{top.effect.words} added provisionally: it ties with "
+                      f"{' and '.join(words[n] for n in rnd.tied if n != top.name)} on the present data")
+        else:
+            chosen, reason = top.name, f"{top.effect.words} has the highest evidence (ln B = {top.log_bayes:+.1f})"
+        rnd = RankingRound(rnd.current, rnd.candidates, rnd.tied, rnd.discrimination, chosen, reason)
+        rounds.append(rnd)
+        if chosen is None:
+            break
+        pick = next(c for c in rnd.candidates if c.name == chosen)
+        t0 = time.perf_counter()
+        recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500)
+        seconds["recalibration"] += time.perf_counter() - t0
+        versions.append(recal)
+        history = history.appended(_errors(recal, settings))
+        remaining = [c for c in remaining if c.name != chosen]
+    seconds["total"] = time.perf_counter() - t_start
+    seconds["forward_model"] = runner.seconds
+    met, headline, details, steps = _summarise(versions, rounds, history, settings)
+    return DiagnosisResult(obs, settings, versions, rounds, history, met, headline, details, steps,
+                           runner.to_dict(), seconds, cands)
+
+
+def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: ErrorHistory,
+               settings: DiagnosisSettings) -> tuple[bool, str, list[str], list[str]]:
+    """Verdict headline, details and next steps in words."""
+    base, final = versions[0], versions[-1]
+    first, last = history.versions[0], history.versions[-1]
+    w = settings.within_sigma
+    met = bool(last.n_within == last.n_observables and last.n_observables > 0)
+    details = [base.adequacy.sentence]
+    steps: list[str] = []
+    if base.adequacy.adequate and len(versions) == 1:
+        headline = (f"No effect is needed: the base model reproduces all {first.n_observables} observables "
+                    f"(DEM at the best fit: largest |z| {first.max_abs_z:.1f})")
+        if not met:
+            headline += f"; {first.n_observables - first.n_within} lie beyond {w:g} sigma at the single best fit"
+        steps.append("Use a parameter set from the plausible set; to narrow it, measure more observables "
+                     "(drum speeds, the pile test, bulk density).")
+    elif len(versions) == 1:
+        headline = "This model cannot reproduce these measurements, and none of the candidate effects explains why"
+        if rounds:
+            details.append(rounds[-1].reason)
+        steps.append("Consider effects beyond the candidates (or a model discrepancy), and check the measurements "
+                     "named in the conflicts.")
+    else:
+        added = " and ".join(e.words for e in final.version.effects)
+        state = (f"every observable lies within {w:g} sigma" if met
+                 else f"{last.n_observables - last.n_within} of {last.n_observables} observables remain beyond {w:g} sigma")
+        lead = ("The base model cannot reproduce these measurements; " if not base.adequacy.adequate else "")
+        headline = (f"{lead}with {added} added, {state} (DEM at the recalibrated best fit, largest |z| "
+                    f"{last.max_abs_z:.1f})")
+        headline = headline[0].upper() + headline[1:]
+        steps.append(f"Enable {added} in the model configuration (add: {list(final.version.effect_names)}) with the "
+                     "recalibrated parameters: " + ", ".join(f"{k} = {v:.3g}" for k, v in final.best_parameters.items())
+                     + ".")
+    for r in rounds:
+        details.extend(c.sentence for c in r.candidates)
+        if r.discrimination is not None:
+            details.append(r.discrimination.sentence)
+            d = r.discrimination
+            if d.recommended is not None:
+                f = d.forecasts[0]
+            words = {c.name: c.effect.words for c in r.candidates}
+            if d.recommended is not None:
+                f = d.forecasts[0]
+                steps.insert(0, f"Measure the {f.proposal.name} ({f.proposal.n_repeats} repeats): "
+                             + "; ".join(f"{words[n]} predicts {f.means[n]:.3g} ± {f.sds[n]:.2g} {f.proposal.unit}"
+                                         for n in d.candidates) + f" (separation {f.separation:.1f} sigma).")
+            else:
+                steps.insert(0, "The present and proposed measurements cannot separate "
+                             f"{' and '.join(words[n] for n in d.candidates)}: look for an experiment where they act "
+                             "differently (faster or looser flow, a free pile).")
+        if r.chosen is not None:
+            details.append(f"Chosen: {r.reason}.")
+    if len(history.versions) > 1:
+        details.append(f"Error history (DEM): chi2 per observable {first.chi2_per_observable:.2f} -> "
+                       f"{last.chi2_per_observable:.2f}; largest |z| {first.max_abs_z:.1f} -> {last.max_abs_z:.1f}.")
+    off = [k for k, v in last.z.items() if not abs(v) <= w]
+    if off and len(versions) > 1:
+        steps.append(f"Still beyond {w:g} sigma: {', '.join(off)}; try the next candidate (max_added_effects) or "
+                     "review these measurements.")
+    weak = [q.key for q in final.surrogates.quality if q.r2 is not None and q.r2 < 0.8]
+    if weak:
+        steps.append(f"Surrogates with cross-validated R^2 below 0.8 ({', '.join(weak)}): add design points "
+                     "(design_points_per_parameter) before trusting fine differences.")
+    return met, headline, details, steps

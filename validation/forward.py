@@ -1,0 +1,121 @@
+"""The forward-model interface: how the diagnosis asks for simulations.
+
+One call of :meth:`ForwardModel.evaluate` is one batched launch per experiment: every parameter
+set times every replicate (an independent fill) runs as its own world.  The diagnosis never sees
+DEM objects, only numbers, so it is tested in seconds with an analytic model.
+
+:class:`ForwardRunner` wraps a model: it checks each answer's shape, counts runs and time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["ForwardModel", "ProposedMeasurement", "ForwardRunner"]
+
+
+@dataclass(frozen=True)
+class ProposedMeasurement:
+    """A condition not yet measured that the forward model can predict (e.g. drum at 60 rpm).
+
+    expected_standard_error : the standard error (``unit``) the lab expects for a mean of
+        ``n_repeats``; None: estimated from the DEM fill-to-fill spread as ``s_DEM / sqrt(n_repeats)``.
+    """
+
+    key: str
+    experiment: str
+    quantity: str
+    unit: str
+    condition: Mapping[str, Any] = field(default_factory=dict)
+    label: str = ""
+    expected_standard_error: float | None = None
+    n_repeats: int = 3
+
+    def __post_init__(self) -> None:
+        for name in ("key", "experiment", "quantity", "unit"):
+            v = getattr(self, name)
+            if not isinstance(v, str) or not v.strip():
+                raise ValueError(f"proposed measurement {self.key!r}: {name} must be a non-empty string, got {v!r}")
+        object.__setattr__(self, "condition", MappingProxyType(dict(self.condition)))
+        if self.expected_standard_error is not None:
+            se = float(self.expected_standard_error)
+            if not (math.isfinite(se) and se >= 0):
+                raise ValueError(f"proposed measurement {self.key!r}: expected_standard_error must be >= 0, got {se}")
+        if isinstance(self.n_repeats, bool) or not isinstance(self.n_repeats, (int, np.integer)) or self.n_repeats < 1:
+            raise ValueError(f"proposed measurement {self.key!r}: n_repeats must be an integer >= 1, got {self.n_repeats!r}")
+
+    @property
+    def name(self) -> str:
+        return self.label or self.key
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"key": self.key, "experiment": self.experiment, "quantity": self.quantity, "unit": self.unit,
+                "condition": dict(self.condition), "label": self.label,
+                "expected_standard_error": self.expected_standard_error, "n_repeats": self.n_repeats}
+
+
+class ForwardModel(ABC):
+    """What the diagnosis needs from a simulator."""
+
+    @abstractmethod
+    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]],
+                 replicates: int, keys: Sequence[str]) -> np.ndarray:
+        """Simulate ``keys`` for every parameter set, ``replicates`` independent fills each.
+
+        effects : names of the effects switched on (empty: base model).
+        parameter_sets : one ``{parameter name: value}`` per set (base + effect parameters).
+        replicates : independent fills per set (>= 1).
+        keys : observable keys (measured ones, or keys of :meth:`proposals`).
+
+        Returns an array of shape ``(len(parameter_sets), replicates, len(keys))`` in each
+        observable's unit; NaN where a run failed.
+        """
+
+    def proposals(self) -> Sequence[ProposedMeasurement]:
+        """Conditions the model can predict that were not measured (for telling candidates apart)."""
+        return ()
+
+
+class ForwardRunner:
+    """Calls a :class:`ForwardModel`, checks every answer, counts runs and wall time (s)."""
+
+    def __init__(self, model: ForwardModel):
+        if not hasattr(model, "evaluate") or not callable(model.evaluate):
+            raise TypeError(f"forward model must have an evaluate(...) method, got {type(model).__name__}")
+        self.model = model
+        self.calls = 0
+        self.runs = 0
+        self.failed_runs = 0
+        self.seconds = 0.0
+
+    def __call__(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]],
+                 replicates: int, keys: Sequence[str]) -> np.ndarray:
+        if len(parameter_sets) == 0:
+            raise ValueError("no parameter sets to evaluate")
+        if isinstance(replicates, bool) or not isinstance(replicates, (int, np.integer)) or replicates < 1:
+            raise ValueError(f"replicates must be an integer >= 1, got {replicates!r}")
+        t0 = time.perf_counter()
+        out = np.asarray(self.model.evaluate(tuple(effects), [dict(p) for p in parameter_sets], int(replicates),
+                                             tuple(keys)), dtype=float)
+        self.seconds += time.perf_counter() - t0
+        want = (len(parameter_sets), int(replicates), len(keys))
+        if out.shape != want:
+            raise ValueError(f"forward model {type(self.model).__name__}.evaluate returned shape {out.shape}, expected "
+                             f"(n_sets, replicates, n_keys) = {want} for keys {list(keys)}")
+        if np.any(np.isinf(out)):
+            raise ValueError(f"forward model {type(self.model).__name__}.evaluate returned infinite values; "
+                             "use NaN for a failed run")
+        self.calls += 1
+        self.runs += want[0] * want[1]
+        self.failed_runs += int(np.sum(np.all(np.isnan(out), axis=2)))
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"calls": self.calls, "runs": self.runs, "failed_runs": self.failed_runs, "seconds": self.seconds}

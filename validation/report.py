@@ -1,0 +1,175 @@
+"""The diagnosis as a self-contained HTML report (built with :mod:`calibration.reporting`).
+
+Reading order (issue 11): verdict, comparison table, where it fails, ranking with sentences,
+what to measure next, error history; then surrogate quality and the forward-model cost.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Mapping
+
+import numpy as np
+
+from calibration.reporting import Cell, Figure, Report, Section, Table, Verdict
+
+from .evidence import bayes_factor_words
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .diagnose import DiagnosisResult
+
+__all__ = ["build_report"]
+
+
+def _z_cell(z: float, within: float, cutoff: float) -> Cell:
+    if not np.isfinite(z):
+        return Cell(None, "warn")
+    tone = "good" if abs(z) <= within else ("warn" if abs(z) <= cutoff else "bad")
+    return Cell(round(float(z), 2), tone)
+
+
+def _fig(paths: Mapping[str, os.PathLike], name: str, caption: str) -> list[Figure]:
+    return [Figure.from_path(paths[name], caption, name.replace("_", " "))] if name in paths else []
+
+
+def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.PathLike]) -> Report:
+    """The report of ``result``; ``figure_paths`` maps figure stems to PNG files (embedded)."""
+    s = result.settings
+    w, cut = s.within_sigma, s.cutoff
+    obs = result.observations
+    base, final = result.base, result.final
+    first, last = result.history.versions[0], result.history.versions[-1]
+    numbers = [("base model: largest |z| (DEM)", first.max_abs_z),
+               ("base model: χ² per observable", first.chi2_per_observable)]
+    if len(result.versions) > 1:
+        numbers += [(f"{final.name}: largest |z|", last.max_abs_z),
+                    (f"{final.name}: χ² per observable", last.chi2_per_observable)]
+    numbers += [("observables within 2σ (final)", f"{last.n_within} of {last.n_observables}"),
+                ("DEM runs", result.forward["runs"]), ("wall time (s)", round(result.seconds["total"], 1))]
+    verdict = Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers)
+
+    # --- comparison
+    cols = ["observable", "unit", "measured (mean ± SE, n)"]
+    for v in result.versions:
+        cols += [f"{v.name}: DEM mean ± spread", f"{v.name}: z"]
+    rows = []
+    for j, o in enumerate(obs):
+        meas = (f"< {o.detection_limit:g} (no value, n={o.n})" if o.is_censored
+                else f"{o.mean:.4g} ± {o.standard_error:.2g} (n={o.n})")
+        row = [o.name, o.unit, meas]
+        for v in result.versions:
+            c = v.confirmation
+            row += [f"{c.mean[j]:.4g} ± {c.spread[j]:.2g}", _z_cell(c.z[j], w, cut)]
+        rows.append(row)
+    comparison = Section("Comparison at the best fit", [
+        "Each model version is calibrated on all observables at once and then re-simulated at its best fit "
+        f"({s.confirm_replicates} fresh fills). z = (measured − simulated) / σ, with σ² = SE² + s_DEM²/n + "
+        "Var(simulated mean) (history matching, Vernon et al. 2010). Green: |z| ≤ 2, amber: ≤ 3, red: beyond.",
+        Table(cols, rows, caption="Measured against simulated"),
+        *_fig(figure_paths, "comparison", "Measured (black, mean ± standard error) and simulated (DEM mean ± "
+                                          "spread over fills) values per experiment."),
+    ])
+
+    # --- where it fails
+    a = base.adequacy
+    fail_blocks: list = [a.sentence]
+    if a.unreachable or a.conflicts:
+        fail_blocks.append(Table(["observables in conflict", "best compromise (max implausibility)", "meaning"],
+                                 [[", ".join(obs[obs.index(k)].name for k in c.keys), Cell(round(c.best_max_implausibility, 2), "bad"),
+                                   "unreachable on its own" if len(c.keys) == 1 else "reachable alone, never together"]
+                                  for c in a.unreachable + a.conflicts],
+                                 caption="Minimal sets of observables that no parameter setting makes plausible together"))
+    fail_blocks += list(a.notes)
+    fail_blocks += _fig(figure_paths, "residuals", "Residual of every observable for each model version; "
+                                                    "the green band is the target |z| ≤ 2, red dashes the cut-off 3.")
+    sections = [comparison, Section("Where the base model fails" if not a.adequate else "Adequacy of the base model",
+                                    fail_blocks)]
+    if a.adequate:
+        sp = base.version.space
+        sections.append(Section("Plausible set (the ambiguity the data leave)", [
+            Table(["parameter", "unit", "box", "plausible range", "best fit"],
+                  [[n, u, f"{lo:.3g} – {hi:.3g}", f"{a.plausible_ranges[n][0]:.3g} – {a.plausible_ranges[n][1]:.3g}",
+                    base.best_parameters[n]] for n, u, lo, hi in zip(sp.names, sp.units, sp.lower, sp.upper)]),
+            *_fig(figure_paths, "plausible_set", "Parameter ranges in which every observable stays within "
+                                                 "implausibility 3."),
+        ]))
+
+    # --- ranking
+    for i, r in enumerate(result.rounds):
+        suffix = "" if i == 0 else f"_{i + 1}"
+        rows = []
+        for c in r.candidates:
+            d = c.to_dict()
+            eff = ", ".join(f"{k} = {c.study.best_parameters[k]:.3g}" for k in c.effect.parameter_names)
+            rows.append([c.rank, c.effect.words, eff, f"{c.log_evidence:.1f} ± {c.study.evidence.standard_error:.2f}",
+                         Cell(round(c.log_bayes, 1), "good" if c.log_bayes > np.log(20) else ""),
+                         bayes_factor_words(c.log_bayes), round(d["bic"], 1), round(d["aic"], 1),
+                         _z_cell(d["max_abs_z"], w, cut), f"{int(np.sum(np.abs(c.z) <= w))} of {len(obs)}",
+                         round(c.signature.alignment, 2)])
+        blocks: list = [
+            f"Each candidate is added to the {r.current.name} model and calibrated with its own design; the ranking is "
+            "by the Bayes factor B from the surrogate-integrated evidence Z (uniform prior over each parameter "
+            "box), which charges for the part of an added parameter's range the data rule out (Kass & Raftery "
+            "1995 reading). BIC and AIC are listed for reference; the alignment is the cosine between the "
+            "effect's signature and the current residuals (+1: points exactly at the data).",
+            Table(["rank", "effect", "calibrated effect parameters", "ln Z ± MC error", f"ln B vs {r.current.name}",
+                   "reading", "BIC", "AIC", "largest |z| (DEM)", f"within {w:g}σ", "alignment"], rows,
+                  caption=f"Candidate effects on top of the {r.current.name}"),
+            *[c.sentence for c in r.candidates],
+            *_fig(figure_paths, "signatures" + suffix,
+                  "How each effect moves every observable (full strength, at the current best fit) beside what "
+                  "the current model misses."),
+        ]
+        if r.chosen:
+            blocks.append(f"Chosen: {r.reason}.")
+        elif r.reason:
+            blocks.append(r.reason[0].upper() + r.reason[1:] + ".")
+        sections.append(Section("Ranking of the candidate effects" + (f" (round {i + 1})" if i else ""), blocks))
+        if r.discrimination is not None:
+            d = r.discrimination
+            words = {c.name: c.effect.words for c in r.candidates}
+            frows = [[f.proposal.name, f.proposal.unit] + [f"{f.means[n]:.4g} ± {f.sds[n]:.2g}" for n in d.candidates]
+                     + [round(f.measurement_sd, 3), Cell(round(f.separation, 2), "good" if f.separation >= d.threshold else "")]
+                     for f in d.forecasts]
+            sections.append(Section("What to measure next", [
+                d.sentence,
+                *([Table(["proposed measurement", "unit"] + [words[n] for n in d.candidates]
+                         + ["expected SE", "separation (σ)"], frows,
+                         caption="Predicted outcomes (posterior mean ± predictive sd) of each proposed measurement")]
+                  if frows else []),
+                *_fig(figure_paths, "discrimination" + suffix, "Predictions of the tied candidates at the best "
+                                                               "proposed conditions."),
+            ]))
+
+    # --- error history
+    if len(result.history.versions) > 1:
+        hrows = [[v.version, v.n_parameters, round(v.chi2, 2), v.dof, v.chi2_per_dof, round(v.chi2_per_observable, 3),
+                  _z_cell(v.max_abs_z, w, cut), f"{v.n_within} of {v.n_observables}"] for v in result.history.versions]
+        sections.append(Section("Error history: add the effect and watch the error fall", [
+            Table(["model version", "parameters", "χ²", "dof", "χ²/dof", "χ² per observable", "largest |z|",
+                   f"within {w:g}σ"], hrows, caption="DEM-confirmed errors of each model version"),
+            *_fig(figure_paths, "error_history", "Error of every observable and in total across model versions."),
+        ]))
+
+    # --- surrogates and cost
+    qrows = []
+    for v in result.versions:
+        for q, sd in zip(v.surrogates.quality, v.noise_sd):
+            o = obs[obs.index(q.key)]
+            qrows.append([v.name, o.name, o.unit, q.n_train, q.r2, q.rmse, q.coverage_2sd, sd])
+    sections.append(Section("Surrogates and DEM noise", [
+        "One Gaussian process per observable (Matern 5/2 with one length scale per parameter + white noise); "
+        "quality from k-fold cross-validation; the DEM noise is the pooled fill-to-fill sd over the design's "
+        "replicates.",
+        Table(["model version", "observable", "unit", "design sets", "CV R²", "CV RMSE", "CV coverage of ±2 sd",
+               "DEM noise sd"], qrows),
+    ]))
+    f = result.forward
+    footer = (f"warpdem diagnosis · forward model: {f['calls']} calls, {f['runs']} runs ({f['failed_runs']} failed), "
+              f"{f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · every number is in diagnosis.json")
+    return Report(title="Model versus measurement: diagnosis", verdict=verdict, sections=sections,
+                  next_steps=result.next_steps,
+                  subtitle=f"{len(obs)} observables · base parameters: {', '.join(base.version.space.names)} · "
+                           f"candidates: {', '.join(c.words for c in result.candidates) or 'none'}",
+                  footer=footer)

@@ -1,0 +1,91 @@
+"""Settings of a diagnosis (plain data; every threshold documented where it is used)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Mapping
+
+__all__ = ["DiagnosisSettings"]
+
+
+def _int(name: str, v, lo: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+        raise ValueError(f"DiagnosisSettings.{name} must be an integer >= {lo}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    """How much to simulate and which thresholds to apply.
+
+    design_points_per_parameter, min_design_points : Latin-hypercube size per model version,
+        ``max(min_design_points, design_points_per_parameter * k)`` for k parameters.
+    replicates : independent fills per design set (>= 2: the DEM noise is measured from them).
+    confirm_replicates : fills of the DEM confirmation run at each best fit.
+    refine_points : extra design sets placed in the plausible region when the chosen effect is
+        recalibrated (a second history-matching wave; 0: none).
+    scan_points : Sobol points of the surrogate scan of the box (rounded up to a power of 2).
+    evidence_samples : importance samples of the evidence integral.
+    cutoff : implausibility cut-off (3: Pukelsheim's 3-sigma rule; Vernon et al. 2010).
+    within_sigma : |z| counted as "within" in sentences and the error history (2).
+    tie_log_bayes : top candidates whose ln Z differ by less than this are tied and need a new
+        measurement (ln 3: Kass & Raftery's "not worth more than a bare mention", B < 3).
+    separation_sigma : a proposed measurement separates two tied candidates when their predicted
+        outcomes differ by at least this many combined sds (2).
+    max_added_effects : how many effects may be added in turn (base, base+A, base+A+B, ...).
+    add : effect names to add regardless of the ranking (the config line / ``--add EFFECT``).
+    rank_when_adequate : rank the candidates even when the base model is adequate.
+    model_discrepancy : optional model-discrepancy sd per observable key (in its unit).
+    max_conflict_size : largest observable subset searched for conflicts.
+    gp_restarts, cv_folds : surrogate hyperparameter restarts and cross-validation folds.
+    seed : seed of every design, scan and sample.
+    """
+
+    design_points_per_parameter: int = 8
+    min_design_points: int = 16
+    replicates: int = 2
+    confirm_replicates: int = 3
+    refine_points: int = 8
+    scan_points: int = 2 ** 14
+    evidence_samples: int = 2 ** 13
+    cutoff: float = 3.0
+    within_sigma: float = 2.0
+    tie_log_bayes: float = math.log(3.0)
+    separation_sigma: float = 2.0
+    max_added_effects: int = 1
+    add: tuple[str, ...] = ()
+    rank_when_adequate: bool = False
+    model_discrepancy: Mapping[str, float] = field(default_factory=dict)
+    max_conflict_size: int = 3
+    gp_restarts: int = 2
+    cv_folds: int = 5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        _int("design_points_per_parameter", self.design_points_per_parameter, 1)
+        _int("min_design_points", self.min_design_points, 4)
+        _int("replicates", self.replicates, 2)
+        _int("confirm_replicates", self.confirm_replicates, 1)
+        _int("refine_points", self.refine_points, 0)
+        _int("scan_points", self.scan_points, 64)
+        _int("evidence_samples", self.evidence_samples, 256)
+        _int("max_added_effects", self.max_added_effects, 0)
+        _int("max_conflict_size", self.max_conflict_size, 1)
+        _int("gp_restarts", self.gp_restarts, 0)
+        _int("cv_folds", self.cv_folds, 2)
+        _int("seed", self.seed, 0)
+        for name in ("cutoff", "within_sigma", "tie_log_bayes", "separation_sigma"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"DiagnosisSettings.{name} must be a positive number, got {v!r}")
+        if isinstance(self.add, str):
+            raise ValueError(f"DiagnosisSettings.add must be a tuple of effect names, got the string {self.add!r}")
+        object.__setattr__(self, "add", tuple(self.add))
+        object.__setattr__(self, "model_discrepancy", MappingProxyType(dict(self.model_discrepancy)))
+
+    def to_dict(self) -> dict:
+        d = dict(self.__dict__)
+        d["add"] = list(self.add)
+        d["model_discrepancy"] = dict(self.model_discrepancy)
+        return d
