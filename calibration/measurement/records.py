@@ -359,6 +359,45 @@ def _image_settings(V: _V, d: Any, key: str) -> dict:
     return kw
 
 
+def _images(V: _V, imgs: Any, settings: dict, key: str) -> list[tuple[str, dict]]:
+    """A list of pictures (paths or {path, per-image settings}) -> [(path, measure_image kwargs)]."""
+    if not isinstance(imgs, list):
+        raise V.err(key, f"expected a list of images, got {type(imgs).__name__}")
+    if not imgs:
+        raise V.err(key, "empty repeats")
+    out: list[tuple[str, dict]] = []
+    for i, item in enumerate(imgs):
+        ik = f"{key}[{i}]"
+        if isinstance(item, str):
+            out.append((V.path(item, ik), dict(settings)))
+        else:
+            item = V.mapping(item, ik)
+            V.keys(item, _IMG_KEYS | {"path"}, ik, required=("path",))
+            own = _image_settings(V, {k: v for k, v in item.items() if k != "path"}, ik) \
+                if len(item) > 1 else {}
+            kw = dict(settings)
+            if "window" in own:
+                kw.pop("window", None)
+                kw.pop("window_units", None)
+            kw.update(own)
+            out.append((V.path(item["path"], f"{ik}.path"), kw))
+    return out
+
+
+def _video(V: _V, v: Any, key: str) -> dict[str, Any]:
+    """A drum video entry {path, rpm, discard, record, fps?, t0_s?} (validated, path resolved)."""
+    v = V.mapping(v, key)
+    V.keys(v, _VIDEO_KEYS, key, required=("path", "rpm", "discard", "record"))
+    return {
+        "path": V.path(v["path"], f"{key}.path"),
+        "fps": V.number(v["fps"], f"{key}.fps", lo=0, lo_open=True) if "fps" in v else None,
+        "rpm": V.number(v["rpm"], f"{key}.rpm", lo=0, lo_open=True),
+        "discard": V.integer(v["discard"], f"{key}.discard", lo=0),
+        "record": V.integer(v["record"], f"{key}.record", lo=1),
+        "t0_s": V.number(v.get("t0_s", 0.0), f"{key}.t0_s"),
+    }
+
+
 def _condition(V: _V, exp: str, kind: str, name: str, d: Any, key: str) -> ConditionRecord:
     d = V.mapping(d, key)
     V.keys(d, _COND_KEYS, key)
@@ -408,37 +447,9 @@ def _condition(V: _V, exp: str, kind: str, name: str, d: Any, key: str) -> Condi
             rec.repeats.append(V.numbers(r, f"{kk}[{i}]", **rng) if isinstance(r, list)
                                else V.number(r, f"{kk}[{i}]", **rng))
     elif data == "images":
-        imgs = d["images"]
-        if not isinstance(imgs, list):
-            raise V.err(kk, f"expected a list of images, got {type(imgs).__name__}")
-        if not imgs:
-            raise V.err(kk, "empty repeats")
-        for i, item in enumerate(imgs):
-            ik = f"{kk}[{i}]"
-            if isinstance(item, str):
-                rec.images.append((V.path(item, ik), dict(settings)))
-            else:
-                item = V.mapping(item, ik)
-                V.keys(item, _IMG_KEYS | {"path"}, ik, required=("path",))
-                own = _image_settings(V, {k: v for k, v in item.items() if k != "path"}, ik) \
-                    if len(item) > 1 else {}
-                kw = dict(settings)
-                if "window" in own:
-                    kw.pop("window", None)
-                    kw.pop("window_units", None)
-                kw.update(own)
-                rec.images.append((V.path(item["path"], f"{ik}.path"), kw))
+        rec.images = _images(V, d["images"], settings, kk)
     else:  # video
-        v = V.mapping(d["video"], kk)
-        V.keys(v, _VIDEO_KEYS, kk, required=("path", "rpm", "discard", "record"))
-        rec.video = {
-            "path": V.path(v["path"], f"{kk}.path"),
-            "fps": V.number(v["fps"], f"{kk}.fps", lo=0, lo_open=True) if "fps" in v else None,
-            "rpm": V.number(v["rpm"], f"{kk}.rpm", lo=0, lo_open=True),
-            "discard": V.integer(v["discard"], f"{kk}.discard", lo=0),
-            "record": V.integer(v["record"], f"{kk}.record", lo=1),
-            "t0_s": V.number(v.get("t0_s", 0.0), f"{kk}.t0_s"),
-        }
+        rec.video = _video(V, d["video"], kk)
         rec.video_settings = settings
     if average == "slope" and data == "angles_deg":
         raise V.err(f"{key}.average", "average 'slope' needs slopes, images or a video, not angles_deg")
