@@ -1,0 +1,133 @@
+"""Fluid forces from a sampled flow (pump.coupling.GridFluidForces): terminal velocity in still
+water (Di Felice with the local voidage, Schiller-Naumann), relaxation to a uniform stream, the
+added-mass time constant, the undisturbed-flow force, buoyancy, the voidage grid."""
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import warpdem as wd
+from pump.coupling import GridFluidForces
+from pump.flow import FlowGrid
+
+RHO_F, MU_F = 998.2, 1.002e-3
+NEUTRAL = wd.Material("neutral", 1.0e7, 0.3, RHO_F)
+
+
+def still(lower=(-0.5, -0.5, -3.0), upper=(0.5, 0.5, 0.5), velocity=(0.0, 0.0, 0.0), viscosity=MU_F):
+    return FlowGrid.uniform(velocity, lower, upper, 0.05, viscosity=viscosity)
+
+
+def simulation(spheres, forces, material=wd.GRAVEL, gravity=(0.0, 0.0, -9.81), dt=5e-5, worlds=None, velocity=None):
+    b = wd.ModelBuilder(num_worlds=1 if worlds is None else max(worlds) + 1, gravity=gravity)
+    b.add_material(material)
+    for k, (x, r) in enumerate(spheres):
+        b.add_sphere(x, r, material.name, world=0 if worlds is None else worlds[k],
+                     velocity=(0, 0, 0) if velocity is None else velocity)
+    b.add_body_force(forces)
+    return wd.Simulation(b.finalize("cpu", check_overlaps=False), dt=dt, force=True)  # no contacts here
+
+
+def di_felice_terminal(d, rho_p, eps, g=9.81):
+    weight = (rho_p - RHO_F) * math.pi * d**3 / 6 * g
+
+    def balance(v):
+        re = RHO_F * d * eps * v / MU_F
+        chi = 3.7 - 0.65 * math.exp(-((1.5 - math.log10(re)) ** 2) / 2)
+        cd = (0.63 + 4.8 / math.sqrt(re)) ** 2
+        return 0.125 * cd * RHO_F * math.pi * d**2 * eps ** (2 - chi) * v**2 - weight
+
+    return brentq(balance, 1e-9, 100.0, xtol=1e-14)
+
+
+def schiller_naumann_terminal(d, rho_p, g=9.81):
+    weight = (rho_p - RHO_F) * math.pi * d**3 / 6 * g
+
+    def balance(v):
+        re = RHO_F * d * v / MU_F
+        cd = 24 / re * (1 + 0.15 * re**0.687) if re < 1000 else 0.44
+        return 0.125 * cd * RHO_F * math.pi * d**2 * v**2 - weight
+
+    return brentq(balance, 1e-9, 100.0, xtol=1e-14)
+
+
+@pytest.mark.parametrize("drag", ["di_felice", "schiller_naumann"])
+def test_terminal_velocity_in_still_water(drag):
+    d, cell = 0.01, 0.1
+    forces = GridFluidForces(still(), drag=drag, voidage_cell=cell)
+    sim = simulation([((0.0, 0.0, 0.0), d / 2)], forces)
+    sim.run(14_000)  # 0.7 s
+    eps = 1 - math.pi * d**3 / 6 / cell**3
+    expected = di_felice_terminal(d, wd.GRAVEL.density, eps) if drag == "di_felice" else \
+        schiller_naumann_terminal(d, wd.GRAVEL.density)
+    v = sim.state.body_v.numpy()[0]
+    assert forces.voidage.numpy()[0] == pytest.approx(eps, abs=1e-6)
+    assert -v[2] == pytest.approx(expected, rel=0.01)
+    assert np.hypot(v[0], v[1]) < 1e-9
+
+
+def test_sphere_takes_the_velocity_of_a_uniform_stream():
+    u = np.array([2.1, 0.0, -0.7])
+    forces = GridFluidForces(still(velocity=u, viscosity=0.05))
+    sim = simulation([((0.0, 0.0, 0.0), 0.002)], forces, gravity=(0.0, 0.0, 0.0))
+    sim.run(10_000)  # 0.5 s, 10 Stokes times
+    v = sim.state.body_v.numpy()[0]
+    assert np.linalg.norm(v - u) < 0.01 * np.linalg.norm(u)
+
+
+@pytest.mark.parametrize("c_a", [0.0, 0.5])
+def test_added_mass_lengthens_the_stokes_time_constant(c_a):
+    """Stokes regime from rest: v = v_t (1 - exp(-t / tau)), tau = (m + C_a m_f) / (3 pi mu d)."""
+    r, mu, dt = 0.001, 10.0, 1e-6
+    forces = GridFluidForces(still(viscosity=mu), drag="schiller_naumann", added_mass=c_a)
+    sim = simulation([((0.0, 0.0, 0.0), r)], forces, dt=dt)
+    vol = 4 / 3 * math.pi * r**3
+    tau = (wd.GRAVEL.density + c_a * RHO_F) * vol / (6 * math.pi * mu * r)
+    v_t = 2 / 9 * (wd.GRAVEL.density - RHO_F) * 9.81 * r**2 / mu
+    times, speeds = [], []
+    for _ in range(int(3 * tau / dt)):
+        sim.run(1)
+        times.append(sim.time)
+        speeds.append(-sim.state.body_v.numpy()[0][2])
+    t63 = float(np.interp(1 - math.exp(-1), np.array(speeds) / v_t, times))
+    assert t63 == pytest.approx(tau, rel=0.02)
+
+
+def test_undisturbed_flow_force_accelerates_a_neutral_sphere_with_the_fluid():
+    """rho_p = rho_f: (m + C_a m_f) dv/dt = m_f Du/Dt + C_a m_f Du/Dt, so dv/dt = Du/Dt."""
+    grid = still(viscosity=1e-7)
+    a_f = np.array([10.0, -4.0, 0.0], dtype=np.float32)
+    grid.acceleration[...] = a_f
+    sim = simulation([((0.0, 0.0, 0.0), 0.005)], GridFluidForces(grid, drag="schiller_naumann"), material=NEUTRAL,
+                     gravity=(0.0, 0.0, -9.81), dt=1e-5)
+    sim.run(100)
+    v = sim.state.body_v.numpy()[0]
+    # horizontal: follows Du/Dt (within the lagged added mass' start-up); vertical: buoyancy = weight
+    assert v[:2] == pytest.approx(a_f[:2] * sim.time, rel=0.01)
+    assert abs(v[2]) < 1e-6
+    sim_off = simulation([((0.0, 0.0, 0.0), 0.005)], GridFluidForces(grid, drag="schiller_naumann",
+                                                                    pressure_gradient=0.0), material=NEUTRAL,
+                         gravity=(0.0, 0.0, 0.0), dt=1e-5)
+    sim_off.run(100)
+    assert np.abs(sim_off.state.body_v.numpy()[0]).max() < 1e-9
+
+
+def test_voidage_counts_the_solids_of_each_world_in_its_cell():
+    cell, r = 0.1, 0.01
+    pts = [((0.02, 0.02, 0.02), r), ((0.05, 0.05, 0.05), r), ((0.08, 0.02, 0.06), r), ((0.05, 0.05, 0.05), r),
+           ((0.25, 0.05, 0.05), r)]
+    forces = GridFluidForces(still(lower=(0, 0, 0), upper=(0.5, 0.5, 0.5)), voidage_cell=cell)
+    sim = simulation(pts, forces, worlds=[0, 0, 0, 1, 0], gravity=(0, 0, 0))
+    sim.run(1)
+    v = 4 / 3 * math.pi * r**3
+    assert forces.voidage.numpy() == pytest.approx([1 - 3 * v / cell**3] * 3 + [1 - v / cell**3] * 2, abs=1e-6)
+
+
+def test_bad_coupling_input_is_named():
+    with pytest.raises(wd.ConfigError, match="unknown drag law 'ergun'"):
+        GridFluidForces(still(), drag="ergun")
+    with pytest.raises(wd.ConfigError, match="FlowGrid"):
+        GridFluidForces(np.zeros((3, 3, 3)))
+    with pytest.raises(wd.ConfigError, match="grid_fluid.added_mass"):
+        GridFluidForces(still(), added_mass=-1)
