@@ -54,7 +54,8 @@ class DEMForwardModel(ForwardModel):
 
     Args:
         base: the base model description (contact law, material or None, plugins).
-        base_material: the material when ``base.material`` is None (e.g. the measurement file's).
+        base_material: the material when ``base.material`` is None (e.g. the measurement file's);
+            None: each experiment's scale preset material.
         effects: the candidate effects by name (switched on by name in :meth:`evaluate`).
         observables: every key the diagnosis may ask for (measured and proposed).
         scale: experiment preset ("paper", "quick"; drum also "short"), per experiment in
@@ -65,7 +66,7 @@ class DEMForwardModel(ForwardModel):
         cache: JSONL file of world results (None: no cache).
     """
 
-    def __init__(self, base: ModelDescription, base_material: BulkMaterial, effects: Sequence[DEMEffect],
+    def __init__(self, base: ModelDescription, base_material: BulkMaterial | None, effects: Sequence[DEMEffect],
                  observables: Sequence[ObservableSpec], scale: str = "paper",
                  experiment_settings: Mapping[str, Mapping[str, Any]] | None = None,
                  fixed: Mapping[str, float] | None = None, device: str | None = None,
@@ -102,11 +103,22 @@ class DEMForwardModel(ForwardModel):
                 self._cache[rec["id"]] = rec
 
     # ------------------------------------------------------------------ helpers
-    def description(self, effects: Sequence[str]) -> ModelDescription:
+    def material_for(self, experiment: str) -> BulkMaterial:
+        """The base material of one experiment: the description's, the given one, or the preset's."""
+        if self.base.material is not None:
+            return self.base.material
+        if self.base_material is not None:
+            return self.base_material
+        extra = dict(self.experiment_settings.get(experiment, {}))
+        return make_experiment(experiment, extra.pop("scale", self.scale), **extra).bulk_material()
+
+    def description(self, effects: Sequence[str], experiment: str) -> ModelDescription:
+        """The base plus ``effects`` for one experiment, with that experiment's material."""
         unknown = [e for e in effects if e not in self.effects]
         if unknown:
             raise ConfigError(f"unknown effect(s) {unknown}; this forward model knows {sorted(self.effects)}")
-        return apply_effects(self.base, [self.effects[e] for e in effects], self.base_material)
+        base = ModelDescription(self.base.contact_law, self.material_for(experiment), self.base.plugins)
+        return apply_effects(base, [self.effects[e] for e in effects], base.material)
 
     def proposals(self) -> Sequence[ProposedMeasurement]:
         return self._proposals
@@ -115,7 +127,7 @@ class DEMForwardModel(ForwardModel):
         extra = dict(self.experiment_settings.get(name, {}))
         scale = extra.pop("scale", self.scale)
         kw = {**extra, **{k: v for k, v in settings.items() if k != "rpm"}}
-        material = desc.material or self.base_material
+        material = desc.material
         return make_experiment(name, scale, contact_law=desc.contact_law, plugins=desc.plugins, material=material,
                                fill_per_world=True, first_fill_index=first_fill, **kw)
 
@@ -133,9 +145,6 @@ class DEMForwardModel(ForwardModel):
     def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
                  keys: Sequence[str]) -> np.ndarray:
         out = np.full((len(parameter_sets), replicates, len(keys)), np.nan)
-        desc = self.description(effects)
-        model_fp = _fingerprint(desc.describe())
-        shape_names = set(desc.shape_specs(desc.material))
         # group keys by (experiment, settings without rpm): one run each, rpm per world
         groups: dict[tuple[str, str], list[int]] = {}
         for k_i, key in enumerate(keys):
@@ -146,6 +155,8 @@ class DEMForwardModel(ForwardModel):
             groups.setdefault((o.experiment, json.dumps(settings, sort_keys=True, default=str)), []).append(k_i)
         for (exp_name, settings_json), k_idx in groups.items():
             settings = json.loads(settings_json)
+            desc = self.description(effects, exp_name)
+            model_fp = _fingerprint(desc.describe())
             rpms = sorted({self.observables[keys[k]].settings.get("rpm") for k in k_idx},
                           key=lambda v: -1 if v is None else float(v))
             exp_fp = _fingerprint([exp_name, self.scale, self.experiment_settings.get(exp_name, {}), settings,
@@ -158,7 +169,7 @@ class DEMForwardModel(ForwardModel):
                         if wid not in self._cache:
                             todo.append((i, r, rpm, wid))
             if todo:
-                self._run_worlds(exp_name, settings, desc, parameter_sets, todo, shape_names)
+                self._run_worlds(exp_name, settings, desc, parameter_sets, todo)
             for i, ps in enumerate(parameter_sets):
                 for r in range(replicates):
                     for k in k_idx:
@@ -169,7 +180,7 @@ class DEMForwardModel(ForwardModel):
         return out
 
     def _run_worlds(self, exp_name: str, settings: Mapping[str, Any], desc: ModelDescription,
-                    parameter_sets: Sequence[Mapping[str, float]], todo: list, shape_names: set[str]) -> None:
+                    parameter_sets: Sequence[Mapping[str, float]], todo: list) -> None:
         """Run the missing worlds of one experiment in one launch and cache their observables."""
         first_fill = DESIGN_FILLS + len(self._cache) + 1000 * len(self.log)
         exp = self._experiment(exp_name, settings, desc, first_fill)
@@ -186,7 +197,7 @@ class DEMForwardModel(ForwardModel):
         self.dem_worlds += len(sets)
         self.log.append({"experiment": exp_name, "settings": dict(settings), "worlds": len(sets),
                          "wall_s": round(wall, 2), "model": desc.contact_law.describe(),
-                         "material": (desc.material or self.base_material).name})
+                         "material": desc.material.name})
         for (i, r, rpm, wid), res in zip(todo, results):
             self._store({"id": wid, "experiment": exp_name, "status": res.status, "error": res.error,
                          "parameters": dict(parameter_sets[i]), "replicate": r, "rpm": rpm,

@@ -283,7 +283,8 @@ class ElongatedClumps(ShapeFamily):
     spheres_per_particle = 5
     parameters = (
         ParameterSpec("aspect_ratio", "length / width", 1.0, (1.0, 3.5),
-                      "elongation of the rounded rod: bounding length over width (1 = sphere)"),
+                      "elongation of the rounded rod: bounding length over width (1 = sphere)",
+                      design_range=(1.0, 2.5), off_value=1.0),
     )
     reference = ("Favier et al. (1999) Eng. Comput. 16:467 (overlapping spheres on an axis); "
                  "Markauskas et al. (2010) Granul. Matter 12:107 (multi-sphere surface bumpiness)")

@@ -63,13 +63,35 @@ class ContactInput:
 
 @dataclass(frozen=True)
 class ParameterSpec:
-    """A contact parameter declared by a sub-model (stored per world and per pair type)."""
+    """A parameter declared by a sub-model or shape family (contact ones are stored per world and
+    per pair type).
+
+    bounds: admissible range (anything outside is refused). design_range: the range a calibration
+    or diagnosis design explores by default when the config gives none (None: ``bounds``).
+    off_value: the value at which the physical effect is absent (rolling friction 0, cohesion 0,
+    aspect ratio 1); None for parameters that are never "off" (friction, restitution).
+    """
 
     name: str
     unit: str
     default: float
     bounds: tuple[float, float]
     description: str
+    design_range: tuple[float, float] | None = None
+    off_value: float | None = None
+
+    def __post_init__(self) -> None:
+        lo, hi = self.bounds
+        for what, rng in (("design_range", self.design_range),):
+            if rng is not None and not (lo <= rng[0] < rng[1] <= hi):
+                raise ConfigError(f"parameter '{self.name}': {what} {rng} must lie within its bounds [{lo}, {hi}]")
+        if self.off_value is not None and not lo <= self.off_value <= hi:
+            raise ConfigError(f"parameter '{self.name}': off_value {self.off_value} outside its bounds [{lo}, {hi}]")
+
+    @property
+    def exploration_range(self) -> tuple[float, float]:
+        """``design_range`` if declared, else the admissible ``bounds``."""
+        return tuple(self.design_range) if self.design_range is not None else tuple(self.bounds)
 
     def check(self, full_name: str, value: float) -> None:
         lo, hi = self.bounds
@@ -85,6 +107,8 @@ class SubModel:
     parameters: ClassVar[tuple[ParameterSpec, ...]] = ()
     needs_history: ClassVar[bool] = False
     reference: ClassVar[str] = ""
+    #: the sub-model a diagnosis tries first for its kind's effect (e.g. rolling resistance)
+    default_candidate: ClassVar[bool] = False
 
     def make(self, column: Callable[[str], int]) -> "wp.Function":
         """Return the ``wp.func`` implementing this sub-model.

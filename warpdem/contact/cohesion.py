@@ -54,6 +54,8 @@ COHESION_ENERGY_DENSITY = ParameterSpec(
     "cohesion_energy_density", "J/m^3", 0.0, (0.0, 1.0e7),
     "cohesion energy density k of SJKR: attractive normal force k A over the contact area A "
     "(LIGGGHTS cohesionEnergyDensity)",
+    # 1e5 J/m^3 pulls a 20 mm gravel sphere (E = 1e7 Pa) off a ceiling against its weight
+    design_range=(0.0, 1.5e5), off_value=0.0,
 )
 
 
@@ -84,6 +86,7 @@ class SimplifiedJKR(SubModel):
 
     kind = "cohesion"
     name = "sjkr"
+    default_candidate = True
     parameters = (COHESION_ENERGY_DENSITY,)
     reference = ("LIGGGHTS-PUBLIC src/cohesion_model_sjkr.h (simplified JKR, F = -k A, A = exact "
                  "intersection area of the two spheres)")

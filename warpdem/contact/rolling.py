@@ -42,7 +42,8 @@ import warp as wp
 
 from .base import ContactInput, ParameterSpec, SubModel, register
 
-MU_R = ParameterSpec("mu_r", "-", 0.1, (0.0, 10.0), "rolling friction coefficient")
+MU_R = ParameterSpec("mu_r", "-", 0.1, (0.0, 10.0), "rolling friction coefficient",
+                     design_range=(0.0, 0.3), off_value=0.0)
 
 
 @wp.func
@@ -116,6 +117,7 @@ class ElasticPlasticSpringDashpot(SubModel):
 class LiggghtsEPSD2(SubModel):
     kind = "rolling"
     name = "epsd2"
+    default_candidate = True
     parameters = (MU_R,)
     needs_history = True
     reference = ("LIGGGHTS rolling_friction epsd2 (LIGGGHTS-PUBLIC src/rolling_model_epsd2.h): "

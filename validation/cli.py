@@ -1,0 +1,178 @@
+"""``warpdem diagnose CONFIG``: model versus measurements, the missing effect, the error falling.
+
+Reads the config (:mod:`validation.config`) and the measurement file it names, checks both
+against the engine's declarations before any DEM runs, builds the DEM forward model
+(:mod:`validation.dem_forward`) and the candidate effects (:mod:`validation.dem_effects`), runs
+:func:`validation.diagnose.diagnose` and writes ``diagnosis.json``, the figures and
+``report.html`` to the output folder. DEM runs are cached in ``dem_runs.jsonl`` there: an
+interrupted diagnosis resumes where it stopped.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+from warpdem import ConfigError
+
+__all__ = ["diagnose_main", "build_diagnosis"]
+
+
+def _material_of_measurements(path: Path):
+    """The material a measurement file declares (None when it declares none)."""
+    from calibration.materials import BulkMaterial
+    from calibration.measurement.records import load_measurements
+
+    mf = load_measurements(path)
+    mat = getattr(mf, "material", None)
+    if mat is None or isinstance(mat, BulkMaterial):
+        return mat
+    return BulkMaterial.from_config(dict(mat))
+
+
+def _preset_material(cfg):
+    from calibration.experiments import make_experiment
+
+    return make_experiment("baffle", cfg.scale).bulk_material()
+
+
+def _proposals(cfg, observables) -> list:
+    """Conditions worth forecasting when candidates tie: the config's list, or (auto) the drum at
+    speeds not measured, and A's bulk density / C's pile height when they were not measured."""
+    from calibration.experiments import EXPERIMENTS
+
+    from .forward import ProposedMeasurement
+
+    if cfg.proposals == "none":
+        return []
+    out = []
+    if cfg.proposals != "auto":
+        for i, p in enumerate(cfg.proposals):
+            if p.experiment not in EXPERIMENTS or p.quantity not in EXPERIMENTS[p.experiment].OBSERVABLES:
+                raise ConfigError(f"proposals[{i}]: unknown experiment/quantity {p.experiment}/{p.quantity}")
+            key = f"{p.experiment}/proposed{i}/{p.quantity}"
+            out.append(ProposedMeasurement(key, p.experiment, p.quantity, EXPERIMENTS[p.experiment].OBSERVABLES[p.quantity],
+                                           p.settings, p.label or key, p.expected_standard_error, p.n_repeats))
+        return out
+    measured = {(o.experiment, o.quantity) for o in observables}
+    drum = [o for o in observables if o.experiment == "drum" and o.quantity == "dynamic_angle"]
+    if drum:
+        speeds = {float(o.condition.get("rpm", 0)) for o in drum}
+        other = {k: v for k, v in drum[0].condition.items() if k != "rpm"}
+        for rpm in (5.0, 60.0):
+            if rpm not in speeds:
+                out.append(ProposedMeasurement(f"drum/{rpm:g}rpm/dynamic_angle", "drum", "dynamic_angle", "deg",
+                                               {**other, "rpm": rpm}, f"drum angle at {rpm:g} rpm"))
+    for exp, qty, unit, words in (("baffle", "bulk_density", "kg/m^3", "bulk density of the box fill"),
+                                  ("cylinder", "pile_height", "m", "pile height after the cylinder lift")):
+        base = [o for o in observables if o.experiment == exp]
+        if base and (exp, qty) not in measured:
+            out.append(ProposedMeasurement(f"{exp}/{qty}", exp, qty, unit, dict(base[0].condition), words))
+    return out
+
+
+def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path | None = None,
+                    add: Sequence[str] = (), processes: Any = None):
+    """Everything :func:`validation.diagnose.diagnose` needs, checked: (observations, base space,
+    candidates, forward model, settings, dem effects)."""
+    from calibration.designs import Parameter, ParameterSpace
+    from calibration.model_description import ModelDescription
+
+    from .dem_effects import default_effects, resolve_effect
+    from .dem_forward import DEMForwardModel, ObservableSpec, condition_settings
+    from .measurements import load_observations
+    from .settings import DiagnosisSettings
+
+    mpath = Path(cfg.measurements)
+    if not mpath.is_absolute():
+        mpath = base_dir / mpath
+    if not mpath.is_file():
+        raise ConfigError(f"measurements: file not found: {mpath}")
+    observations = load_observations(mpath)
+    desc = ModelDescription.from_config(cfg.model.model_dump(), base_dir=base_dir, where="model")
+    # None: each experiment's scale preset material (quick-scale checks)
+    material = desc.material or _material_of_measurements(mpath)
+    plist = []
+    for name, bounds in cfg.parameters.items():
+        lo, hi = desc.check_bounds(name, list(bounds), "parameters")
+        spec = desc.parameter_specs()[name]
+        plist.append(Parameter(name, lo, hi, spec.unit, spec.description))
+    fixed = {k: desc.check_value(k, v, "fixed") for k, v in cfg.fixed.items()}
+    both = sorted(set(fixed) & set(cfg.parameters))
+    if both:
+        raise ConfigError(f"parameters and fixed both name {both}")
+    ranges = {k: list(v) for k, v in cfg.effect_ranges.items()}
+    if cfg.candidates == "default":
+        effects = default_effects(desc, material or _preset_material(cfg), ranges)
+    else:
+        effects = [resolve_effect(t, ranges) for t in cfg.candidates]
+    names = [e.name for e in effects]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"candidates: an effect is listed twice: {names}")
+    for e in effects:
+        if e.kind != "shape" and getattr(desc.contact_law, e.kind) != "none":
+            raise ConfigError(f"candidates: the base law already has {e.kind} '{getattr(desc.contact_law, e.kind)}'; "
+                              f"'{e.name}' cannot be added")
+        clash = sorted(set(e.candidate.parameter_names) & (set(cfg.parameters) | set(fixed)))
+        if clash:
+            raise ConfigError(f"candidates: effect '{e.name}' brings {clash}, which the base already calibrates or fixes")
+    added = list(cfg.add) + list(add)
+    for a in added:
+        if a not in names:
+            raise ConfigError(f"add: '{a}' is not among the candidate effects {names}")
+    specs = []
+    for o in observations:
+        settings = condition_settings(o.experiment, dict(o.condition))
+        specs.append(ObservableSpec(o.key, o.experiment, o.quantity, settings))
+    proposals = _proposals(cfg, list(observations))
+    specs += [ObservableSpec(p.key, p.experiment, p.quantity, condition_settings(p.experiment, dict(p.condition)))
+              for p in proposals]
+    out = output or Path(cfg.output or f"results/diagnosis_{cfg.name}")
+    cache = Path(cfg.cache) if cfg.cache else out / "dem_runs.jsonl"
+    forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
+                              fixed=fixed, device=device or cfg.device,
+                              processes=processes if processes is not None else cfg.processes, cache=cache,
+                              progress=False, proposals=proposals)
+    settings = DiagnosisSettings(**{**cfg.diagnosis.model_dump(), "add": tuple(dict.fromkeys(added))})
+    return observations, ParameterSpace(tuple(plist)), [e.candidate for e in effects], forward, settings, out
+
+
+def diagnose_main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="warpdem diagnose", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("config", help="diagnosis config (YAML), see validation/configs/")
+    ap.add_argument("--output", help="output folder (default: the config's 'output')")
+    ap.add_argument("--device", help="cpu or cuda (default: the config's, else cuda if present)")
+    ap.add_argument("--processes", help="CPU worker processes ('auto' = one per core)")
+    ap.add_argument("--add", action="append", default=[], metavar="EFFECT",
+                    help="add this effect whatever the ranking (repeatable)")
+    args = ap.parse_args(list(argv) if argv is not None else None)
+    from .config import load_diagnosis_config
+    from .diagnose import diagnose
+
+    t0 = time.perf_counter()
+    try:
+        cfg, base_dir = load_diagnosis_config(args.config)
+        procs = None
+        if args.processes is not None:
+            procs = args.processes if args.processes == "auto" else int(args.processes)
+        obs, space, cands, forward, settings, out = build_diagnosis(
+            cfg, base_dir, args.device, Path(args.output) if args.output else None, args.add, procs)
+    except (ConfigError, ValueError) as exc:
+        print(f"warpdem diagnose: {exc}", file=sys.stderr)
+        return 2
+    print(f"warpdem diagnose: {len(list(obs))} observables, base parameters {space.names}, candidates "
+          f"{[c.name for c in cands]}; output {out}", file=sys.stderr, flush=True)
+    result = diagnose(obs, space, cands, forward, settings)
+    paths = result.write(out)
+    timing = {"wall_s": round(time.perf_counter() - t0, 1), "dem_s": round(forward.dem_seconds, 1),
+              "dem_worlds_run": forward.dem_worlds, "dem_launches": forward.log,
+              "device": str(forward.device or "default")}
+    (out / "dem_timing.json").write_text(json.dumps(timing, indent=1))
+    print(result.headline)
+    print(f"report: {paths.get('report', out / 'report.html')}  (wall {timing['wall_s']} s, DEM {timing['dem_s']} s, "
+          f"{timing['dem_worlds_run']} worlds run)")
+    return 0

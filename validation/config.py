@@ -1,0 +1,146 @@
+"""The diagnosis config (``warpdem diagnose CONFIG``), checked with pydantic before any DEM runs.
+
+Every problem is reported at once with its path in the file (``parameters.mu_s_pp``,
+``diagnosis.replicates``), then the model is checked against the engine's declarations
+(parameter names, admissible bounds, effect names). Example: ``validation/configs/quick_diagnosis.yaml``.
+
+.. code-block:: yaml
+
+    name: hidden-rolling
+    measurements: lab.yaml            # measurement file (warpdem-measurements/2; v1 loads too)
+    output: results/diagnosis         # default: results/diagnosis_<name>
+    device: null                      # null: cuda if present, else cpu
+    processes: auto                   # CPU: worlds split over one process per core
+    scale: paper                      # experiment preset (paper | quick)
+    experiments: {drum: {scale: short}}   # per experiment: settings for every condition
+    model:
+      contact_law: {rolling: none}    # the base law (every sub-model by name)
+      material: null                  # default: the measurement file's material
+      plugins: []                     # files of extra sub-models / shape families
+    parameters: {mu_s_pp: [0.1, 0.9], mu_s_pw: [0.1, 0.9]}   # calibrated base parameters
+    fixed: {restitution_pp: 0.6, restitution_pw: 0.6}
+    candidates: default               # or a list: [rolling_resistance, cohesion, shape, rolling:cdt]
+    effect_ranges: {mu_r_pp: [0, 0.3]}    # design range of an effect parameter (default: declared)
+    add: []                           # effects to add whatever the ranking (--add EFFECT)
+    proposals: auto                   # conditions to forecast when candidates tie, or a list
+    diagnosis: {replicates: 2}        # validation.settings.DiagnosisSettings fields
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any, Literal, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from warpdem import ConfigError
+
+__all__ = ["DiagnosisConfig", "load_diagnosis_config", "format_validation_error"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ModelSection(_Strict):
+    contact_law: dict[str, Any] = Field(default_factory=lambda: {"rolling": "none"})
+    material: dict[str, Any] | None = None
+    plugins: list[str] = Field(default_factory=list)
+
+
+class ProposalSection(_Strict):
+    experiment: str
+    quantity: str
+    settings: dict[str, Any] = Field(default_factory=dict)
+    label: str = ""
+    n_repeats: int = Field(3, ge=1)
+    expected_standard_error: float | None = Field(None, ge=0)
+
+
+class DiagnosisSection(_Strict):
+    design_points_per_parameter: int = Field(8, ge=1)
+    min_design_points: int = Field(16, ge=4)
+    replicates: int = Field(2, ge=2)
+    confirm_replicates: int = Field(3, ge=1)
+    refine_points: int = Field(8, ge=0)
+    scan_points: int = Field(2 ** 14, ge=64)
+    evidence_samples: int = Field(2 ** 13, ge=256)
+    cutoff: float = Field(3.0, gt=0)
+    within_sigma: float = Field(2.0, gt=0)
+    tie_log_bayes: float = Field(math.log(3.0), gt=0)
+    separation_sigma: float = Field(2.0, gt=0)
+    max_added_effects: int = Field(1, ge=0)
+    rank_when_adequate: bool = False
+    model_discrepancy: dict[str, float] = Field(default_factory=dict)
+    max_conflict_size: int = Field(3, ge=1)
+    gp_restarts: int = Field(2, ge=0)
+    cv_folds: int = Field(5, ge=2)
+    seed: int = Field(0, ge=0)
+
+
+class DiagnosisConfig(_Strict):
+    """The whole diagnosis config; see the module docstring."""
+
+    name: str = "diagnosis"
+    measurements: str
+    output: str | None = None
+    device: str | None = None
+    processes: Union[int, Literal["auto"]] = "auto"
+    scale: Literal["paper", "quick"] = "paper"
+    experiments: dict[Literal["baffle", "drum", "cylinder"], dict[str, Any]] = Field(default_factory=dict)
+    model: ModelSection = Field(default_factory=ModelSection)
+    parameters: dict[str, tuple[float, float]]
+    fixed: dict[str, float] = Field(default_factory=dict)
+    candidates: Union[Literal["default"], list[str]] = "default"
+    effect_ranges: dict[str, tuple[float, float]] = Field(default_factory=dict)
+    add: list[str] = Field(default_factory=list)
+    proposals: Union[Literal["auto", "none"], list[ProposalSection]] = "auto"
+    diagnosis: DiagnosisSection = Field(default_factory=DiagnosisSection)
+    cache: str | None = None
+    progress: bool = True
+
+    @field_validator("processes")
+    @classmethod
+    def _positive_processes(cls, v: Any) -> Any:
+        if isinstance(v, int) and v < 1:
+            raise ValueError("must be >= 1 or 'auto'")
+        return v
+
+    @field_validator("parameters")
+    @classmethod
+    def _nonempty(cls, v: dict) -> dict:
+        if not v:
+            raise ValueError("give at least one calibrated parameter: name -> [lower, upper]")
+        return v
+
+
+def format_validation_error(exc: ValidationError, source: str) -> str:
+    """One line per problem, with its path in the file."""
+    lines = [f"{source}: {len(exc.errors())} problem(s) in the config:"]
+    for e in exc.errors():
+        path = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        lines.append(f"  {path}: {msg} (got {e.get('input')!r})" if e["type"] != "missing" else f"  {path}: missing")
+    return "\n".join(lines)
+
+
+def load_diagnosis_config(path: str | os.PathLike) -> tuple[DiagnosisConfig, Path]:
+    """Read and check a diagnosis config; returns (config, folder of the file). Errors are
+    :class:`ConfigError` listing every problem with its path."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"diagnosis config not found: {p}")
+    try:
+        raw = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{p}: the top level must be a mapping of keys, got {type(raw).__name__}")
+    try:
+        return DiagnosisConfig.model_validate(raw), p.parent
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc, str(p))) from None
