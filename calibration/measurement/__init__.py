@@ -6,7 +6,8 @@ C hollow cylinder, Images) and the seed paper's Section 2.1.2 / Tables 1, 10.
 - :mod:`.profiles`: angles from particle centres (N, 3) and radii (m).
 - :mod:`.images`: OpenCV pipeline for photographs and drum videos.
 - :mod:`.render`: camera-like side views of particles; synthetic test piles.
-- :mod:`.records`: measurement files (YAML/JSON) with repeats and statistics.
+- :mod:`.records`: measurement files (YAML/JSON; versions 1 and 2) with repeats, protocol
+  settings and statistics; plain observation records; the version-2 writer.
 - :mod:`.cli`: ``warpdem measure``.
 """
 
@@ -35,12 +36,24 @@ from .profiles import (
     surface_profile,
 )
 from .records import (
+    FORMAT_V1,
+    FORMAT_V2,
+    NO_PILE_LIMIT_DEG,
+    QUANTITY_UNITS,
     AngleStats,
     ConditionRecord,
     ExperimentRecord,
     MeasurementFile,
+    ObservableRecord,
+    ObservationRecord,
+    check_settings,
     load_measurements,
+    measurements_v2_mapping,
     parse_measurements,
+    protocol_settings,
+    registered_experiments,
+    unreported_observables,
+    write_measurements_v2,
 )
 from .render import RenderedView, render_side_view, synthetic_pile, synthetic_slope_image
 
@@ -80,4 +93,16 @@ __all__ = [
     "MeasurementFile",
     "load_measurements",
     "parse_measurements",
+    "FORMAT_V1",
+    "FORMAT_V2",
+    "NO_PILE_LIMIT_DEG",
+    "QUANTITY_UNITS",
+    "ObservableRecord",
+    "ObservationRecord",
+    "check_settings",
+    "protocol_settings",
+    "registered_experiments",
+    "unreported_observables",
+    "measurements_v2_mapping",
+    "write_measurements_v2",
 ]

@@ -1,25 +1,39 @@
-"""Measurement files: repeated lab (or simulated) angle measurements.
+"""Measurement files: repeated lab (or simulated) measurements with their protocol settings.
 
-Format (YAML, or JSON with a ``.json`` extension), documented in
-docs/measurement_format.md; example: calibration/data/zhang2023_table1.yaml
-(seed paper Tables 1 and 10). Per experiment and condition a file holds the
-repeats of an angle (``angles_deg``), of fitted slopes (``slopes``; angle =
-atan(|slope|), seed paper Table 1), or images / a video to be measured with
-:mod:`.images`. A repeat may be a list of views (e.g. theta_1..4 of the hollow
-cylinder, Table 10), whose mean is the repeat's value.
+Two formats (YAML, or JSON with a ``.json`` extension), documented in
+docs/measurement_format.md:
 
-Loading validates everything and raises :class:`.errors.MeasurementFileError`
-naming the file and the key. :meth:`ConditionRecord.stats` gives the mean,
-sample standard deviation (ddof=1) and standard error over repeats.
+``warpdem-measurements/1`` (example: calibration/data/zhang2023_table1.yaml, seed paper Tables
+1 and 10): per experiment and condition the repeats of one angle (``angles_deg``), of fitted
+slopes (``slopes``; angle = atan(|slope|)), or images / a video to be measured with
+:mod:`.images`. A repeat may be a list of views (theta_1..4 of the hollow cylinder, Table 10),
+whose mean is the repeat's value.
+
+``warpdem-measurements/2`` (example: calibration/data/example_v2.yaml): per registered experiment
+(baffle, drum, cylinder) and condition the protocol ``settings`` the simulation must reproduce
+(experiment field names, SI units: drum ``rpm``, ``lift_speed`` [m/s], ``fill_mass`` [kg], ...)
+and several ``observables``, each a quantity with a unit and its repeats (angles in deg, bulk
+density in kg/m^3, pile height in m, any other scalar with its unit), or a censored result
+("no pile formed": ``no_pile: n``; ``below_detection: {n, limit}``). Angles may be given as
+slopes, images or a video as in version 1. The material that was measured is stated once.
+
+Loading validates everything and raises :class:`.errors.MeasurementFileError` naming the file
+and the dotted key. :meth:`ConditionRecord.stats` gives the mean, sample standard deviation
+(ddof=1) and standard error of a condition's angle; :meth:`MeasurementFile.observations` gives
+one plain :class:`ObservationRecord` per experiment, condition and quantity for either version;
+:func:`check_settings` checks experiment and setting names against the registered experiments;
+:func:`write_measurements_v2` writes records to a version-2 file that loads back identically.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 import yaml
@@ -29,16 +43,33 @@ from .profiles import slope_to_angle_deg
 
 __all__ = [
     "FORMAT",
+    "FORMAT_V1",
+    "FORMAT_V2",
     "KINDS",
+    "QUANTITY_UNITS",
+    "UNIT_CONVERSIONS",
+    "NO_PILE_LIMIT_DEG",
+    "SIMULATION_SETTINGS",
     "AngleStats",
     "ConditionRecord",
     "ExperimentRecord",
     "MeasurementFile",
+    "ObservableRecord",
+    "ObservationRecord",
     "load_measurements",
     "parse_measurements",
+    "check_settings",
+    "protocol_settings",
+    "registered_experiments",
+    "unreported_observables",
+    "measurements_v2_mapping",
+    "write_measurements_v2",
 ]
 
-FORMAT = "warpdem-measurements/1"
+#: version 1 (one angle per experiment and condition); ``FORMAT`` kept for existing callers
+FORMAT = FORMAT_V1 = "warpdem-measurements/1"
+#: version 2 (several observables per condition, protocol settings, censored results)
+FORMAT_V2 = "warpdem-measurements/2"
 
 #: experiment kinds (spec sections A, B, C) and their default averaging rule:
 #: "angle" = mean of per-repeat angles (Table 1 static, Table 10),
@@ -70,6 +101,67 @@ _IMG_INT = {"open_px": "open_px", "close_px": "close_px", "illumination_degree":
             "min_points": "min_points"}
 _IMG_KEYS = {*_IMG_NUM, *_IMG_INT, "window_mm", "window_px", "origin_px", "fit_band", "material"}
 _VIDEO_KEYS = {"path", "fps", "rpm", "discard", "record", "t0_s"}
+
+# ---- version 2
+#: registered experiment -> the v1 kind of its angle (averaging rule of slopes / images / video)
+EXPERIMENT_KINDS: dict[str, str] = {"baffle": "baffle_static", "drum": "drum_dynamic", "cylinder": "hollow_cylinder"}
+#: registered experiment -> its angle quantity (what ``ConditionRecord.stats`` of a v2 condition measures)
+ANGLE_QUANTITIES: dict[str, str] = {"baffle": "static_angle", "drum": "dynamic_angle", "cylinder": "pile_angle"}
+#: v1 kind -> (experiment, quantity) of its observations; kind "other" -> (v1 experiment name, "angle")
+V1_OBSERVABLES: dict[str, tuple[str, str]] = {
+    "baffle_static": ("baffle", "static_angle"),
+    "drum_dynamic": ("drum", "dynamic_angle"),
+    "hollow_cylinder": ("cylinder", "pile_angle"),
+}
+#: known quantity -> the unit the simulation reports it in (values are stored in this unit);
+#: a quantity not listed accepts any unit string and is kept as written
+QUANTITY_UNITS: dict[str, str] = {
+    "static_angle": "deg",       # A, alpha_AoR_S
+    "dynamic_angle": "deg",      # B, beta_AoR_D
+    "pile_angle": "deg",         # C, gamma_s
+    "angle": "deg",              # v1 kind "other"
+    "bulk_density": "kg/m^3",    # A, bulk density of the fill
+    "pile_height": "m",          # C, peak height of the pile
+    "pile_formed": "1/0",        # C, 1 if a pile formed, else 0
+    "mass_left_in_box": "kg",    # A, mass left in the box after the lift
+}
+#: stored unit -> {accepted unit as written: factor to the stored unit}
+UNIT_CONVERSIONS: dict[str, dict[str, float]] = {
+    "deg": {"deg": 1.0},
+    "kg/m^3": {"kg/m^3": 1.0, "kg/m3": 1.0, "g/cm^3": 1000.0, "g/cm3": 1000.0},
+    "m": {"m": 1.0, "cm": 0.01, "mm": 0.001},
+    "kg": {"kg": 1.0, "g": 0.001},
+    "1/0": {"1/0": 1.0},
+}
+#: valid values per stored unit (checked on the values as written; every bound is 0 or an angle)
+_UNIT_RANGES: dict[str, dict[str, Any]] = {
+    "deg": dict(lo=0.0, hi=90.0, hi_open=True),
+    "kg/m^3": dict(lo=0.0, lo_open=True),
+    "m": dict(lo=0.0),
+    "kg": dict(lo=0.0),
+}
+#: quantities that take ``no_pile: n`` (hollow cylinder C: the material spread, no angle to read)
+NO_PILE_QUANTITIES: tuple[str, ...] = ("pile_angle",)
+#: detection limit [deg] of ``no_pile``: the smallest pile angle a profile resolves
+NO_PILE_LIMIT_DEG = 3.0
+#: base-experiment fields that are no condition setting: the model and the numerics (never a lab
+#: protocol) and ``material`` (stated once, at the top of a v2 file)
+SIMULATION_SETTINGS = frozenset({
+    "scale", "material", "contact_law", "plugins", "contact_defaults", "dt", "v_ref", "force_dt",
+    "max_contacts", "max_neighbours", "overflow_retries", "seed", "fill_per_world", "first_fill_index",
+})
+_ORIGIN_DEFAULT = "lab"
+_V2_TOP_KEYS = {"format", "title", "source", "notes", "material", "experiments"}
+_V2_EXP_KEYS = {"description", "conditions"}
+_V2_COND_KEYS = {"description", "origin", "settings", "observables"}
+_V2_DATA_KEYS = ("repeats", "slopes", "images", "video")
+_V2_CENSOR_KEYS = ("no_pile", "below_detection")
+_V2_OBS_KEYS = {"unit", "resolution", "label", "description", "image_settings", "average",
+                *_V2_DATA_KEYS, *_V2_CENSOR_KEYS}
+_ANGLE_ONLY_KEYS = ("slopes", "images", "video", "image_settings", "average")
+#: experiment and quantity names: identifiers; condition names: no "/" and no white space
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_COND_NAME = re.compile(r"^[^/\s]+$")
 
 
 # --------------------------------------------------------------------------- #
@@ -131,6 +223,12 @@ class ConditionRecord:
     data: "angles_deg", "slopes", "images" or "video". repeats: per-repeat
     number or list of view numbers (angles in degrees, or slopes).
     images: list of (path, measure_image kwargs). video: dict or None.
+
+    Version 2: the fields above describe the condition's angle (the experiment's angle quantity,
+    e.g. ``dynamic_angle`` of the drum, or its only quantity in deg), so that :meth:`stats`
+    works as for version 1; data is "censored" when that angle fell below detection in every
+    repeat ("no pile formed") and "none" without an angle. ``settings``: the protocol settings
+    (experiment field names, SI units). ``observables``: every quantity by name.
     """
 
     experiment: str
@@ -146,6 +244,8 @@ class ConditionRecord:
     images: list[tuple[str, dict]] = field(default_factory=list)
     video: dict[str, Any] | None = None
     video_settings: dict[str, Any] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+    observables: dict[str, "ObservableRecord"] = field(default_factory=dict)
     _cache: AngleStats | None = field(default=None, repr=False)
 
     def stats(self, *, diagnostic_dir: str | os.PathLike | None = None) -> AngleStats:
@@ -156,6 +256,14 @@ class ConditionRecord:
         """
         if self._cache is not None and diagnostic_dir is None:
             return self._cache
+        if self.data == "censored":
+            obs = self.observables.get(ANGLE_QUANTITIES.get(self.experiment, ""))
+            n = obs.n_censored if obs is not None else 0
+            raise MeasurementError(f"{self.experiment}/{self.name}: no angle: below the detection limit in all "
+                                   f"{n} repeats (e.g. no pile formed)")
+        if self.data == "none":
+            raise MeasurementError(f"{self.experiment}/{self.name}: no angle measured here; its observables are "
+                                   f"{', '.join(self.observables)}")
         if self.data in ("angles_deg", "slopes"):
             views = [list(map(float, r)) if isinstance(r, list) else None for r in self.repeats]
             has_views = any(v is not None for v in views)
@@ -201,6 +309,125 @@ class ConditionRecord:
 
 
 @dataclass
+class ObservableRecord:
+    """One observable of a version-2 condition, as written in the file (values in ``unit``).
+
+    quantity: e.g. "dynamic_angle". unit: the stored unit (for a known quantity the one the
+    simulation reports, :data:`QUANTITY_UNITS`; values written in another accepted unit, e.g.
+    mm, are converted). data: "repeats", "slopes", "images", "video" or "censored" (only
+    below-detection repeats). repeats: per-repeat number or list of view numbers (data
+    "repeats" of a non-angle quantity; angles keep theirs in ``angle``). n_censored: repeats
+    below ``censor_limit`` (``no_pile`` / ``below_detection``). resolution: reading resolution
+    in ``unit`` (0: not given). angle: for an angle quantity with data, the v1-style record that
+    measures it (images / video) and gives :class:`AngleStats`.
+    """
+
+    experiment: str
+    condition: str
+    quantity: str
+    unit: str
+    data: str
+    repeats: list[Any] = field(default_factory=list)
+    n_censored: int = 0
+    censor_limit: float | None = None
+    resolution: float = 0.0
+    label: str = ""
+    description: str = ""
+    angle: ConditionRecord | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def key(self) -> str:
+        """``"experiment/condition/quantity"``."""
+        return f"{self.experiment}/{self.condition}/{self.quantity}"
+
+    @property
+    def is_angle(self) -> bool:
+        return self.unit == "deg"
+
+    def values(self, *, diagnostic_dir: str | os.PathLike | None = None) -> tuple[float, ...]:
+        """One value per measured repeat in ``unit`` (images / a video are measured; a repeat
+        with views gives their mean); empty when every repeat is censored."""
+        if self.data == "censored":
+            return ()
+        if self.angle is not None:
+            return tuple(float(v) for v in self.angle.stats(diagnostic_dir=diagnostic_dir).values_deg)
+        return tuple(float(np.mean(r)) if isinstance(r, list) else float(r) for r in self.repeats)
+
+    def summary(self, *, measure_images: bool = False) -> dict:
+        """JSON-ready: unit, data, n, mean, std (ddof 1), sem, values, censored count and limit."""
+        out: dict[str, Any] = {"unit": self.unit, "data": self.data}
+        if self.data in ("images", "video") and not measure_images:
+            out["measured"] = False
+        else:
+            vals = np.array(self.values(), float)
+            n = int(vals.size)
+            std = float(np.std(vals, ddof=1)) if n > 1 else None
+            out.update(n=n, mean=float(vals.mean()) if n else None, std=std,
+                       sem=None if std is None else std / math.sqrt(n), values=[float(v) for v in vals])
+        if self.n_censored:
+            out.update(n_censored=self.n_censored, censor_limit=self.censor_limit)
+        if self.resolution:
+            out["resolution"] = self.resolution
+        if self.label:
+            out["label"] = self.label
+        return out
+
+
+@dataclass(frozen=True)
+class ObservationRecord:
+    """One measured scalar of one experiment and condition, as plain numbers (either version).
+
+    experiment: e.g. "drum". condition: the condition's name, e.g. "15rpm". quantity: e.g.
+    "dynamic_angle". unit: e.g. "deg", "kg/m^3", "m". repeats: one value per repeat that gave
+    a value, in ``unit``. settings: the protocol settings the simulation must reproduce
+    (experiment field names, SI units; version 1: the condition's free ``parameters``).
+    n_censored: repeats below ``censor_limit`` [unit] ("no pile formed"). resolution: reading
+    resolution [unit] (0: not given). label, description: plain words. origin: "lab" or
+    "simulation". ``key`` is ``"experiment/condition/quantity"``.
+    """
+
+    experiment: str
+    condition: str
+    quantity: str
+    unit: str
+    repeats: tuple[float, ...] = ()
+    settings: Mapping[str, Any] = field(default_factory=dict)
+    n_censored: int = 0
+    censor_limit: float | None = None
+    resolution: float = 0.0
+    label: str = ""
+    description: str = ""
+    origin: str = _ORIGIN_DEFAULT
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "repeats", tuple(float(v) for v in self.repeats))
+        object.__setattr__(self, "settings", {k: list(v) if isinstance(v, (list, tuple)) else v
+                                              for k, v in dict(self.settings).items()})
+        object.__setattr__(self, "n_censored", int(self.n_censored))
+        object.__setattr__(self, "resolution", float(self.resolution))
+        if self.censor_limit is not None:
+            object.__setattr__(self, "censor_limit", float(self.censor_limit))
+
+    @property
+    def key(self) -> str:
+        """``"experiment/condition/quantity"``, e.g. ``"drum/15rpm/dynamic_angle"``."""
+        return f"{self.experiment}/{self.condition}/{self.quantity}"
+
+    @property
+    def n(self) -> int:
+        """Number of repeats, censored ones included."""
+        return len(self.repeats) + self.n_censored
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready fields, ``key`` included."""
+        return {"key": self.key, "experiment": self.experiment, "condition": self.condition,
+                "quantity": self.quantity, "unit": self.unit, "repeats": list(self.repeats),
+                "settings": dict(self.settings), "n_censored": self.n_censored,
+                "censor_limit": self.censor_limit, "resolution": self.resolution, "label": self.label,
+                "description": self.description, "origin": self.origin}
+
+
+@dataclass
 class ExperimentRecord:
     """An experiment: its kind (spec A/B/C) and its conditions by name."""
 
@@ -212,13 +439,52 @@ class ExperimentRecord:
 
 @dataclass
 class MeasurementFile:
-    """A loaded measurement file."""
+    """A loaded measurement file.
+
+    version: 1 or 2 (the ``format``; a file without one is version 1). material: version 2's
+    description of the material that was measured (a mapping such as ``{type: spheres,
+    diameter: [0.016, 0.020], density: 2661}``, SI units; empty when not given).
+    """
 
     path: str
     title: str
     source: str
     notes: str
     experiments: dict[str, ExperimentRecord]
+    version: int = 1
+    material: dict[str, Any] = field(default_factory=dict)
+
+    def observations(self, *, diagnostic_dir: str | os.PathLike | None = None) -> list[ObservationRecord]:
+        """One record per experiment, condition and quantity, in file order (images and videos
+        are measured; ``diagnostic_dir`` receives their diagnostic pictures).
+
+        Version 1: kind baffle_static -> experiment "baffle", quantity "static_angle";
+        drum_dynamic -> "drum", "dynamic_angle"; hollow_cylinder -> "cylinder", "pile_angle";
+        other -> the file's experiment name, "angle". The repeats are the per-repeat angles
+        (for slopes: atan(|slope|) of each); settings are the condition's ``parameters``. Where two
+        v1 experiments map to the same name, the condition is called "<v1 experiment>.<condition>".
+        """
+        out: list[ObservationRecord] = []
+        if self.version == 1:
+            seen: set[str] = set()
+            for en, exp in self.experiments.items():
+                experiment, quantity = V1_OBSERVABLES.get(exp.kind, (en, "angle"))
+                for cn, c in exp.conditions.items():
+                    condition = cn if f"{experiment}/{cn}/{quantity}" not in seen else f"{en}.{cn}"
+                    values = c.stats(diagnostic_dir=diagnostic_dir).values_deg
+                    rec = ObservationRecord(experiment, condition, quantity, "deg", tuple(values),
+                                            dict(c.parameters), description=c.description, origin=c.origin)
+                    seen.add(rec.key)
+                    out.append(rec)
+            return out
+        for exp in self.experiments.values():
+            for c in exp.conditions.values():
+                for o in c.observables.values():
+                    out.append(ObservationRecord(
+                        o.experiment, o.condition, o.quantity, o.unit, o.values(diagnostic_dir=diagnostic_dir),
+                        dict(c.settings), o.n_censored, o.censor_limit, o.resolution, o.label, o.description,
+                        c.origin))
+        return out
 
     def condition(self, experiment: str, condition: str | None = None) -> ConditionRecord:
         """The named condition (or the only one) of an experiment."""
@@ -237,8 +503,18 @@ class MeasurementFile:
 
     def summary(self, *, measure_images: bool = False) -> dict:
         """JSON-ready statistics of every condition (image/video conditions
-        only when ``measure_images``)."""
+        only when ``measure_images``); version 2: settings and every observable's statistics."""
         out: dict = {}
+        if self.version == 2:
+            for en, exp in self.experiments.items():
+                out[en] = {"conditions": {}}
+                for cn, c in exp.conditions.items():
+                    out[en]["conditions"][cn] = {
+                        "origin": c.origin, "settings": c.settings,
+                        "observables": {q: o.summary(measure_images=measure_images)
+                                        for q, o in c.observables.items()},
+                    }
+            return out
         for en, exp in self.experiments.items():
             out[en] = {"kind": exp.kind, "conditions": {}}
             for cn, c in exp.conditions.items():
@@ -456,15 +732,239 @@ def _condition(V: _V, exp: str, kind: str, name: str, d: Any, key: str) -> Condi
     return rec
 
 
-def parse_measurements(data: Any, *, file: str = "<mapping>", base_dir: str = ".") -> MeasurementFile:
+# --------------------------------------------------------------------------- #
+# version 2
+# --------------------------------------------------------------------------- #
+def _name(V: _V, name: str, key: str, what: str, pattern: re.Pattern) -> str:
+    if not pattern.match(name):
+        rule = "letters, digits and _, not starting with a digit" if pattern is _IDENT else "no '/' and no spaces"
+        raise V.err(key, f"{what} name {name!r} is not allowed ({rule})")
+    return name
+
+
+def _unit(V: _V, quantity: str, d: dict, key: str) -> tuple[str, float]:
+    """(stored unit, factor from the written unit) of ``quantity`` with ``d["unit"]``."""
+    written = V.string(d["unit"], key)
+    if not written.strip():
+        raise V.err(key, "empty unit")
+    stored = QUANTITY_UNITS.get(quantity)
+    if stored is None:
+        return written, 1.0
+    accepted = UNIT_CONVERSIONS[stored]
+    if written not in accepted:
+        raise V.err(key, f"unit {written!r} does not fit {quantity} (use {', '.join(accepted)})")
+    return stored, accepted[written]
+
+
+def _value(V: _V, x: Any, key: str, quantity: str, unit: str, factor: float) -> float:
+    """A repeat's value: checked for the quantity's range as written, converted to ``unit``."""
+    v = V.number(x, key, **_UNIT_RANGES.get(unit, {}))
+    if unit == "1/0" and v not in (0.0, 1.0):
+        raise V.err(key, f"{quantity} is 1 (yes) or 0 (no), got {x!r}")
+    return v * factor
+
+
+def _settings(V: _V, d: Any, key: str) -> dict[str, Any]:
+    """Protocol settings: name -> number, string, boolean, null or list of numbers (SI units)."""
+    d = V.mapping(d, key)
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        kk = f"{key}.{k}"
+        if k == "material":
+            raise V.err(kk, "the material is stated once for the whole file, under 'material' at the top level")
+        if v is None or isinstance(v, (bool, str)):
+            out[k] = v
+        elif isinstance(v, (int, float)):
+            V.number(v, kk)
+            out[k] = v
+        elif isinstance(v, list):
+            out[k] = V.numbers(v, kk)
+        else:
+            raise V.err(kk, f"expected a number, string, boolean, null or a list of numbers, got {v!r}")
+    return out
+
+
+def _material(V: _V, d: Any, key: str) -> dict[str, Any]:
+    """The measured material: name -> number, string, boolean or list of numbers (SI units);
+    ``diameter`` [m] is a number or [d_min, d_max] with 0 < d_min <= d_max."""
+    d = V.mapping(d, key)
+    for k, v in d.items():
+        kk = f"{key}.{k}"
+        if isinstance(v, list):
+            V.numbers(v, kk)
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            V.number(v, kk)
+        elif not isinstance(v, (str, bool)):
+            raise V.err(kk, f"expected a number, string, boolean or a list of numbers, got {v!r}")
+    if "diameter" in d:
+        dia = d["diameter"]
+        ds = V.numbers(dia, f"{key}.diameter", lo=0.0, lo_open=True) if isinstance(dia, list) \
+            else [V.number(dia, f"{key}.diameter", lo=0.0, lo_open=True)]
+        if len(ds) > 2 or ds[0] > ds[-1]:
+            raise V.err(f"{key}.diameter", f"expected a diameter [m] or [d_min, d_max] with d_min <= d_max, got {dia!r}")
+    return dict(d)
+
+
+def _angle_record(V: _V, exp: str, cond: str, data: str, d: dict, key: str) -> ConditionRecord:
+    """The v1-style record of an angle observable with data repeats / slopes / images / video."""
+    kind = EXPERIMENT_KINDS.get(exp, "other")
+    default_average = KINDS[kind] if data != "repeats" else "angle"
+    average = V.string(d.get("average", default_average), f"{key}.average", ("angle", "slope"))
+    if "average" in d and data == "repeats":
+        raise V.err(f"{key}.average", "average applies to slopes, images or a video, not to repeats in deg")
+    if "image_settings" in d and data not in ("images", "video"):
+        raise V.err(f"{key}.image_settings", f"only allowed with images or video, not with {data}")
+    settings = _image_settings(V, d["image_settings"], f"{key}.image_settings") if "image_settings" in d else {}
+    rec = ConditionRecord(experiment=exp, name=cond, kind=kind,
+                          data="angles_deg" if data == "repeats" else data, average=average)
+    kk = f"{key}.{data}"
+    if data in ("repeats", "slopes"):
+        reps = d[data]
+        if not isinstance(reps, list):
+            raise V.err(kk, f"expected a list of repeats, got {type(reps).__name__}")
+        if not reps:
+            raise V.err(kk, "empty repeats")
+        rng = _UNIT_RANGES["deg"] if data == "repeats" else {}
+        for i, r in enumerate(reps):
+            rec.repeats.append(V.numbers(r, f"{kk}[{i}]", **rng) if isinstance(r, list)
+                               else V.number(r, f"{kk}[{i}]", **rng))
+    elif data == "images":
+        rec.images = _images(V, d["images"], settings, kk)
+    else:
+        rec.video = _video(V, d["video"], kk)
+        rec.video_settings = settings
+    return rec
+
+
+def _observable(V: _V, exp: str, cond: str, quantity: str, d: Any, key: str) -> ObservableRecord:
+    d = V.mapping(d, key)
+    V.keys(d, _V2_OBS_KEYS, key, required=("unit",))
+    unit, factor = _unit(V, quantity, d, f"{key}.unit")
+    data_given = [k for k in _V2_DATA_KEYS if k in d]
+    censor_given = [k for k in _V2_CENSOR_KEYS if k in d]
+    if len(data_given) > 1:
+        raise V.err(key, f"give only one of {', '.join(_V2_DATA_KEYS)}; found {' and '.join(data_given)}")
+    if len(censor_given) > 1:
+        raise V.err(key, "give no_pile or below_detection, not both")
+    if not data_given and not censor_given:
+        raise V.err(key, f"missing field: one of {', '.join(_V2_DATA_KEYS + _V2_CENSOR_KEYS)}")
+    if unit != "deg":
+        for k in _ANGLE_ONLY_KEYS:
+            if k in d:
+                raise V.err(f"{key}.{k}", f"only for angles (unit deg), not for {quantity} in {unit}")
+    rec = ObservableRecord(
+        experiment=exp, condition=cond, quantity=quantity, unit=unit,
+        data=data_given[0] if data_given else "censored",
+        resolution=V.number(d.get("resolution", 0.0), f"{key}.resolution", lo=0.0) * factor,
+        label=V.string(d.get("label", ""), f"{key}.label"),
+        description=V.string(d.get("description", ""), f"{key}.description"),
+    )
+    if "no_pile" in d:
+        if quantity not in NO_PILE_QUANTITIES:
+            raise V.err(f"{key}.no_pile", f"only for {', '.join(NO_PILE_QUANTITIES)}; for {quantity} use "
+                                          "below_detection: {n: ..., limit: ...}")
+        rec.n_censored = V.integer(d["no_pile"], f"{key}.no_pile", lo=1)
+        rec.censor_limit = NO_PILE_LIMIT_DEG
+    elif "below_detection" in d:
+        bk = f"{key}.below_detection"
+        b = V.mapping(d["below_detection"], bk)
+        V.keys(b, {"n", "limit"}, bk, required=("n", "limit"))
+        rec.n_censored = V.integer(b["n"], f"{bk}.n", lo=1)
+        rec.censor_limit = V.number(b["limit"], f"{bk}.limit") * factor
+    if data_given:
+        data = data_given[0]
+        if unit == "deg":
+            rec.angle = _angle_record(V, exp, cond, data, d, key)
+        else:
+            kk = f"{key}.repeats"
+            reps = d["repeats"]
+            if not isinstance(reps, list):
+                raise V.err(kk, f"expected a list of repeats, got {type(reps).__name__}")
+            if not reps:
+                raise V.err(kk, "empty repeats")
+            for i, r in enumerate(reps):
+                if isinstance(r, list):
+                    if not r:
+                        raise V.err(f"{kk}[{i}]", "empty list")
+                    rec.repeats.append([_value(V, x, f"{kk}[{i}][{j}]", quantity, unit, factor)
+                                        for j, x in enumerate(r)])
+                else:
+                    rec.repeats.append(_value(V, r, f"{kk}[{i}]", quantity, unit, factor))
+    return rec
+
+
+def _condition_v2(V: _V, exp: str, name: str, d: Any, key: str) -> ConditionRecord:
+    d = V.mapping(d, key)
+    V.keys(d, _V2_COND_KEYS, key, required=("settings", "observables"))
+    settings = _settings(V, d["settings"], f"{key}.settings")
+    obs = V.mapping(d["observables"], f"{key}.observables")
+    if not obs:
+        raise V.err(f"{key}.observables", "no observables")
+    observables = {q: _observable(V, exp, name, _name(V, q, f"{key}.observables.{q}", "quantity", _IDENT), o,
+                                  f"{key}.observables.{q}") for q, o in obs.items()}
+    angle_name = ANGLE_QUANTITIES.get(exp)
+    if angle_name not in observables:
+        in_deg = [q for q, o in observables.items() if o.is_angle]
+        angle_name = in_deg[0] if len(in_deg) == 1 else None
+    angle = observables.get(angle_name) if angle_name else None
+    if angle is not None and angle.angle is not None:
+        rec = angle.angle
+    else:
+        rec = ConditionRecord(experiment=exp, name=name, kind=EXPERIMENT_KINDS.get(exp, "other"),
+                              data="censored" if angle is not None else "none", average="angle")
+    rec.origin = V.string(d.get("origin", _ORIGIN_DEFAULT), f"{key}.origin", _ORIGINS)
+    rec.description = V.string(d.get("description", ""), f"{key}.description")
+    rec.settings = settings
+    rec.observables = observables
+    return rec
+
+
+def _parse_v2(V: _V, d: dict) -> MeasurementFile:
+    V.keys(d, _V2_TOP_KEYS, "", required=("experiments",))
+    exps = V.mapping(d["experiments"], "experiments")
+    if not exps:
+        raise V.err("experiments", "no experiments")
+    out: dict[str, ExperimentRecord] = {}
+    for en, e in exps.items():
+        ek = f"experiments.{en}"
+        _name(V, en, ek, "experiment", _IDENT)
+        e = V.mapping(e, ek)
+        V.keys(e, _V2_EXP_KEYS, ek, required=("conditions",))
+        conds = V.mapping(e["conditions"], f"{ek}.conditions")
+        if not conds:
+            raise V.err(f"{ek}.conditions", "no conditions")
+        records = {}
+        for cn, c in conds.items():
+            ck = f"{ek}.conditions.{cn}"
+            records[cn] = _condition_v2(V, en, _name(V, cn, ck, "condition", _COND_NAME), c, ck)
+        out[en] = ExperimentRecord(en, EXPERIMENT_KINDS.get(en, "other"),
+                                   V.string(e.get("description", ""), f"{ek}.description"), records)
+    return MeasurementFile(
+        V.file,
+        V.string(d.get("title", ""), "title"),
+        V.string(d.get("source", ""), "source"),
+        V.string(d.get("notes", ""), "notes"),
+        out,
+        version=2,
+        material=_material(V, d["material"], "material") if "material" in d else {},
+    )
+
+
+def parse_measurements(data: Any, *, file: str = "<mapping>", base_dir: str = ".",
+                       experiments: "Mapping[str, Any] | str | None" = None, build: bool = False) -> MeasurementFile:
     """Validate an already-parsed measurement mapping (see :func:`load_measurements`)."""
     V = _V(file, base_dir)
     if data is None:
         raise V.err("", "empty file")
     d = V.mapping(data, "(top level)")
+    if "format" in d and d["format"] not in (FORMAT_V1, FORMAT_V2):
+        raise V.err("format", f"unsupported format {d['format']!r} (expected {FORMAT_V1!r} or {FORMAT_V2!r})")
+    if d.get("format") == FORMAT_V2:
+        mf = _parse_v2(V, d)
+        if experiments is not None:
+            check_settings(mf, None if experiments == "registered" else experiments, build=build)
+        return mf
     V.keys(d, _TOP_KEYS, "", required=("experiments",))
-    if "format" in d and d["format"] != FORMAT:
-        raise V.err("format", f"unsupported format {d['format']!r} (expected {FORMAT!r})")
     exps = V.mapping(d["experiments"], "experiments")
     if not exps:
         raise V.err("experiments", "no experiments")
@@ -490,11 +990,15 @@ def parse_measurements(data: Any, *, file: str = "<mapping>", base_dir: str = ".
     )
 
 
-def load_measurements(path: str | os.PathLike) -> MeasurementFile:
-    """Load and validate a measurement file (YAML; JSON if it ends in .json).
+def load_measurements(path: str | os.PathLike, *, experiments: "Mapping[str, Any] | str | None" = None,
+                      build: bool = False) -> MeasurementFile:
+    """Load and validate a measurement file (YAML; JSON if it ends in .json), version 1 or 2.
 
     Image and video paths are relative to the file's folder. Raises
-    :class:`.errors.MeasurementFileError` naming the file and the key.
+    :class:`.errors.MeasurementFileError` naming the file and the key. ``experiments``: check a
+    version-2 file's experiment and setting names (``"registered"``: against the registered
+    experiments; or a mapping, see :func:`check_settings`; None: no check); ``build``: also
+    build every condition's experiment (see :func:`check_settings`).
     """
     path = os.fspath(path)
     try:
@@ -506,4 +1010,206 @@ def load_measurements(path: str | os.PathLike) -> MeasurementFile:
         data = json.loads(text) if path.lower().endswith(".json") else yaml.safe_load(text)
     except (yaml.YAMLError, json.JSONDecodeError) as e:
         raise MeasurementFileError(path, "", f"not valid {'JSON' if path.lower().endswith('.json') else 'YAML'}: {e}") from e
-    return parse_measurements(data, file=path, base_dir=os.path.dirname(os.path.abspath(path)))
+    return parse_measurements(data, file=path, base_dir=os.path.dirname(os.path.abspath(path)),
+                              experiments=experiments, build=build)
+
+
+# --------------------------------------------------------------------------- #
+# checks against the registered experiments (imported lazily: calibration.experiments
+# imports this package)
+# --------------------------------------------------------------------------- #
+def registered_experiments() -> dict[str, type]:
+    """The registered experiment classes by name (``calibration.experiments.EXPERIMENTS``)."""
+    from ..experiments import EXPERIMENTS
+
+    return dict(EXPERIMENTS)
+
+
+def protocol_settings(experiment: "type | Iterable[str]") -> frozenset[str]:
+    """Setting names a condition may give: an experiment class's fields without the model and
+    numerics (:data:`SIMULATION_SETTINGS`), or the given names as they are."""
+    if isinstance(experiment, type):
+        names = experiment.field_names() if hasattr(experiment, "field_names") else \
+            [f.name for f in dataclasses.fields(experiment)]
+        return frozenset(names) - SIMULATION_SETTINGS
+    return frozenset(experiment)
+
+
+def check_settings(measurements: MeasurementFile, experiments: "Mapping[str, Any] | None" = None, *,
+                   build: bool = False) -> None:
+    """Check a version-2 file against the experiments a simulation can run.
+
+    experiments: name -> experiment class (``field_names()``, ``OBSERVABLES``, ``from_config``)
+    or a set of setting names; None: :func:`registered_experiments`. Every experiment must be
+    one of them and every setting one of its :func:`protocol_settings`; an observable the class
+    reports must be in the unit it reports. ``build``: also build each condition's experiment
+    (``from_config("paper", material=<file material>, **settings)``) so that a value the
+    experiment refuses (e.g. a negative rpm) or a material it cannot build is reported here.
+    Raises :class:`MeasurementFileError` naming the file and key. Version-1 files are not
+    checked (their ``parameters`` are free notes).
+    """
+    if measurements.version == 1:
+        return
+    experiments = registered_experiments() if experiments in (None, "registered") else experiments
+    file = measurements.path
+    if build and measurements.material:
+        from ..materials import BulkMaterial
+
+        try:
+            BulkMaterial.from_config(measurements.material)
+        except (ValueError, TypeError) as e:
+            raise MeasurementFileError(file, "material", f"cannot build this material: {e}") from e
+    for en, exp in measurements.experiments.items():
+        ek = f"experiments.{en}"
+        if en not in experiments:
+            raise MeasurementFileError(file, ek, f"unknown experiment {en!r} (registered: "
+                                                 f"{', '.join(sorted(experiments))})")
+        spec = experiments[en]
+        allowed = protocol_settings(spec)
+        reported = getattr(spec, "OBSERVABLES", {}) if isinstance(spec, type) else {}
+        for cn, c in exp.conditions.items():
+            ck = f"{ek}.conditions.{cn}"
+            for name in c.settings:
+                if name not in allowed:
+                    why = " (it sets up the simulation, not the lab protocol)" if name in SIMULATION_SETTINGS else ""
+                    raise MeasurementFileError(file, f"{ck}.settings.{name}",
+                                               f"unknown setting {name!r} of experiment {en!r}{why} "
+                                               f"(valid: {', '.join(sorted(allowed))})")
+            for q, o in c.observables.items():
+                if q in reported and o.unit != reported[q]:
+                    raise MeasurementFileError(file, f"{ck}.observables.{q}.unit",
+                                               f"{en} reports {q} in {reported[q]}, not {o.unit}")
+            if build and isinstance(spec, type) and hasattr(spec, "from_config"):
+                kw = dict(c.settings)
+                if measurements.material:
+                    kw["material"] = dict(measurements.material)
+                try:
+                    spec.from_config("paper", **kw)
+                except (ValueError, TypeError) as e:
+                    raise MeasurementFileError(file, f"{ck}.settings", f"experiment {en!r} refuses these "
+                                                                       f"settings: {e}") from e
+
+
+def unreported_observables(measurements: MeasurementFile,
+                           experiments: "Mapping[str, Any] | None" = None) -> list[str]:
+    """Keys ("experiment/condition/quantity") of observables that no simulation of that experiment
+    reports (not in its class's ``OBSERVABLES``; e.g. ``mass_left_in_box`` today). experiments:
+    name -> experiment class; None: :func:`registered_experiments`. Unknown experiments count."""
+    experiments = registered_experiments() if experiments in (None, "registered") else experiments
+    if measurements.version == 1:
+        pairs = [(*V1_OBSERVABLES.get(e.kind, (en, "angle")), cn)
+                 for en, e in measurements.experiments.items() for cn in e.conditions]
+    else:
+        pairs = [(o.experiment, o.quantity, o.condition) for e in measurements.experiments.values()
+                 for c in e.conditions.values() for o in c.observables.values()]
+    out = []
+    for experiment, quantity, condition in pairs:
+        spec = experiments.get(experiment)
+        if quantity not in (getattr(spec, "OBSERVABLES", {}) if spec is not None else {}):
+            out.append(f"{experiment}/{condition}/{quantity}")
+    return out
+
+
+# --------------------------------------------------------------------------- #
+# writing version 2
+# --------------------------------------------------------------------------- #
+def _plain(v: Any) -> Any:
+    """numpy scalars / tuples -> plain Python numbers / lists (for YAML and JSON)."""
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, Mapping):
+        return {str(k): _plain(x) for k, x in v.items()}
+    return v
+
+
+def measurements_v2_mapping(records: Sequence[ObservationRecord], *, title: str = "", source: str = "",
+                            notes: str = "", material: Mapping[str, Any] | None = None,
+                            descriptions: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The version-2 mapping of ``records`` (grouped by experiment and condition in record order).
+
+    The records of one condition must agree on settings and origin. A censored ``pile_angle``
+    at :data:`NO_PILE_LIMIT_DEG` is written as ``no_pile: n``, any other censored record as
+    ``below_detection: {n, limit}``. descriptions: optional plain words per experiment name or
+    per "experiment/condition". Raises ValueError for duplicated keys or disagreeing conditions.
+    """
+    descriptions = dict(descriptions or {})
+    exps: dict[str, dict[str, Any]] = {}
+    cond_of: dict[tuple[str, str], ObservationRecord] = {}
+    for r in records:
+        if not isinstance(r, ObservationRecord):
+            raise TypeError(f"records must be ObservationRecord objects, got {type(r).__name__}")
+        first = cond_of.setdefault((r.experiment, r.condition), r)
+        where = f"{r.experiment}/{r.condition}"
+        if dict(first.settings) != dict(r.settings):
+            raise ValueError(f"{where}: records disagree on the settings ({dict(first.settings)} for "
+                             f"{first.quantity}, {dict(r.settings)} for {r.quantity})")
+        if first.origin != r.origin:
+            raise ValueError(f"{where}: records disagree on the origin ({first.origin} and {r.origin})")
+        exp = exps.setdefault(r.experiment, {"conditions": {}})
+        if r.experiment in descriptions:
+            exp["description"] = descriptions[r.experiment]
+        cond = exp["conditions"].setdefault(r.condition, {})
+        if not cond:
+            if where in descriptions:
+                cond["description"] = descriptions[where]
+            if r.origin != _ORIGIN_DEFAULT:
+                cond["origin"] = r.origin
+            cond["settings"] = _plain(dict(r.settings))
+            cond["observables"] = {}
+        if r.quantity in cond["observables"]:
+            raise ValueError(f"duplicated observation {r.key!r}")
+        o: dict[str, Any] = {"unit": r.unit}
+        if r.repeats:
+            o["repeats"] = [float(v) for v in r.repeats]
+        if r.n_censored:
+            if r.quantity in NO_PILE_QUANTITIES and r.censor_limit == NO_PILE_LIMIT_DEG:
+                o["no_pile"] = r.n_censored
+            else:
+                o["below_detection"] = {"n": r.n_censored, "limit": r.censor_limit}
+        if r.resolution:
+            o["resolution"] = r.resolution
+        if r.label:
+            o["label"] = r.label
+        if r.description:
+            o["description"] = r.description
+        cond["observables"][r.quantity] = o
+    out: dict[str, Any] = {"format": FORMAT_V2}
+    for k, v in (("title", title), ("source", source), ("notes", notes)):
+        if v:
+            out[k] = v
+    if material:
+        out["material"] = _plain(dict(material))
+    out["experiments"] = exps
+    return out
+
+
+def write_measurements_v2(path: str | os.PathLike, records: Sequence[ObservationRecord], *, title: str = "",
+                          source: str = "", notes: str = "", material: Mapping[str, Any] | None = None,
+                          descriptions: Mapping[str, str] | None = None) -> MeasurementFile:
+    """Write ``records`` as a version-2 file (YAML; JSON if ``path`` ends in .json) and return it loaded.
+
+    The file is validated before it is written, and its observations must equal ``records``
+    (so a generator of synthetic lab data gets back exactly what it wrote; the file groups them
+    by experiment and condition, in order of first appearance): a record in a unit
+    the loader converts (e.g. pile_height in mm) or with a name the format refuses raises
+    ValueError and nothing is written. See :func:`measurements_v2_mapping` for the layout.
+    """
+    path = os.fspath(path)
+    data = measurements_v2_mapping(records, title=title, source=source, notes=notes, material=material,
+                                   descriptions=descriptions)
+    try:
+        mf = parse_measurements(data, file=path, base_dir=os.path.dirname(os.path.abspath(path)))
+    except MeasurementFileError as e:
+        raise ValueError(f"these records do not make a valid measurement file: {e}") from e
+    back = {r.key: r for r in mf.observations()}
+    for want in records:
+        if back.get(want.key) != want:
+            raise ValueError(f"{want.key}: would not load back identically (written {want}, read {back.get(want.key)})")
+    text = json.dumps(data, indent=1) + "\n" if path.lower().endswith(".json") else \
+        f"# Format: docs/measurement_format.md ({FORMAT_V2}).\n" + \
+        yaml.safe_dump(data, sort_keys=False, default_flow_style=None, allow_unicode=True, width=100)
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(text)
+    return mf
