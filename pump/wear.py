@@ -1,0 +1,294 @@
+"""Wear of the pump walls from the DEM contacts.
+
+Definitions (per triangle and world; the engine accumulates the first four in every wall
+contact, :class:`warpdem.solver.WallStats`; v is the velocity of the particle's contact point
+relative to the wall, split into normal v_n and tangential v_t parts):
+
+* Relative wear (EDEM's "relative wear" model, used by the seed paper's Fig. 17):
+  cumulative normal contact energy E_n = sum |F_n v_n| dt [J] and cumulative tangential
+  contact energy E_t = sum |F_t . v_t| dt [J]; no material constant.
+* Cumulative contact force (seed paper Fig. 18, EDEM's "cumulative force"): the sum over the
+  time steps of |F_n| and |F_t| [N] = contact impulse / dt; a component's *average cumulative
+  contact force* is its total divided by its number of elements (as EDEM averages per element;
+  it therefore depends on the meshing -- compare components of similar triangle size).
+* Archard (1953) sliding wear volume V = (K / H) F_n s [m^3] (K dimensionless wear coefficient,
+  H hardness of the wall [Pa], s sliding distance). While a contact slides, |F_t| = mu F_n and
+  E_t = mu sum F_n |v_t| dt, so sum F_n s = E_t / mu_pw; sticking contacts (v_t ~ 0) add
+  almost nothing. Depth = V / triangle area.
+* Finnie (1960) ductile erosion per impact V = k m v^2 f(alpha), f = sin 2 alpha - 3 sin^2 alpha
+  for tan alpha <= 1/3, cos^2 alpha / 3 above (alpha the impact angle from the wall), k [m^3/J]
+  a material constant (1 / (2 p) with p the wall's flow pressure in Finnie's form; the default
+  5e-10 m^3/J is an order of magnitude for steel, so absolute numbers are indicative only).
+  Impacts are found by :class:`ImpactRecorder` (a registered body-force model that adds no
+  force): a wall contact slot with no match in the previous step (same wall, normal within
+  acos 0.7 -- the engine's history rule) is a new impact, with m the body mass and v the contact
+  point's velocity relative to the wall at that step.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from warpdem import kernels as wk
+from warpdem.body_forces import BodyForceContext, BodyForceModel, ParameterSpec, register_body_force
+from warpdem.errors import ConfigError
+
+from .geometry import BLADE_ZONES, COMPONENTS
+
+
+def finnie_f(alpha: np.ndarray) -> np.ndarray:
+    """Finnie's angle function f(alpha) (alpha [rad] from the wall)."""
+    a = np.asarray(alpha, dtype=float)
+    return np.where(np.tan(a) <= 1.0 / 3.0, np.sin(2 * a) - 3 * np.sin(a) ** 2, np.cos(a) ** 2 / 3.0)
+
+
+@wp.func
+def finnie_angle_function(alpha: float):
+    if wp.tan(alpha) <= 1.0 / 3.0:
+        return wp.sin(2.0 * alpha) - 3.0 * wp.sin(alpha) * wp.sin(alpha)
+    return wp.cos(alpha) * wp.cos(alpha) / 3.0
+
+
+@wp.kernel
+def record_wall_impacts(
+    sphere_body: wp.array(dtype=int),
+    sphere_world: wp.array(dtype=int),
+    body_q: wp.array(dtype=wp.vec3),
+    body_v: wp.array(dtype=wp.vec3),
+    body_w: wp.array(dtype=wp.vec3),
+    body_mass: wp.array(dtype=float),
+    body_active: wp.array(dtype=int),
+    max_contacts: int,
+    count_in: wp.array(dtype=int),
+    partner_in: wp.array(dtype=int),
+    wnormal_in: wp.array(dtype=wp.vec3),
+    count_out: wp.array(dtype=int),
+    partner_out: wp.array(dtype=int),
+    wnormal_out: wp.array(dtype=wp.vec3),
+    slot_point: wp.array(dtype=wp.vec3),
+    slot_tri: wp.array(dtype=int),
+    wall_tri_offset: wp.array(dtype=int),
+    wall_lin_vel: wp.array(dtype=wp.vec3),
+    wall_ang_vel: wp.array(dtype=wp.vec3),
+    wall_origin: wp.array(dtype=wp.vec3),
+    wall_t_start: wp.array(dtype=float),
+    wall_t_stop: wp.array(dtype=float),
+    total_tris: int,
+    time: wp.array(dtype=wp.float64),
+    finnie_k: float,
+    erosion: wp.array(dtype=float),
+    impacts: wp.array(dtype=float),
+    impact_energy: wp.array(dtype=float),
+):
+    """New wall contacts of this step -> Finnie erosion, impact count and normal impact
+    energy 1/2 m v_n^2 per triangle (index world * T + triangle)."""
+    i = wp.tid()
+    b = sphere_body[i]
+    if body_active[b] == 0:
+        return
+    base = i * max_contacts
+    t_now = time[0]
+    for s in range(count_out[i]):
+        tag = partner_out[base + s]
+        if tag >= 0:
+            continue
+        nrm = wnormal_out[base + s]
+        new = int(1)
+        for o in range(count_in[i]):
+            if partner_in[base + o] == tag and wp.dot(wnormal_in[base + o], nrm) > wk.WALL_MATCH_COS:
+                new = 0
+        if new == 0:
+            continue
+        kw = -tag - 1
+        cp = slot_point[base + s]
+        v_wall = wp.vec3(0.0)
+        if wk.wall_is_moving(t_now, wall_t_start[kw], wall_t_stop[kw]):
+            tau = wk.wall_motion_time(t_now, wall_t_start[kw], wall_t_stop[kw])
+            centre = wall_origin[kw] + wall_lin_vel[kw] * float(tau)
+            v_wall = wall_lin_vel[kw] + wp.cross(wall_ang_vel[kw], cp - centre)
+        v_rel = body_v[b] + wp.cross(body_w[b], cp - body_q[b]) - v_wall
+        v_n = -wp.dot(v_rel, nrm)
+        if v_n <= 0.0:
+            continue
+        v_t = wp.length(v_rel + v_n * nrm)
+        alpha = wp.atan2(v_n, v_t)
+        m = body_mass[b]
+        idx = sphere_world[i] * total_tris + wall_tri_offset[kw] + slot_tri[base + s]
+        wp.atomic_add(erosion, idx, finnie_k * m * wp.dot(v_rel, v_rel) * finnie_angle_function(alpha))
+        wp.atomic_add(impacts, idx, 1.0)
+        wp.atomic_add(impact_energy, idx, 0.5 * m * v_n * v_n)
+
+
+@register_body_force
+class ImpactRecorder(BodyForceModel):
+    """Records wall impacts (Finnie erosion, count, normal impact energy) per triangle; adds no
+    force. Arrays ``erosion`` [m^3], ``impacts`` [-], ``impact_energy`` [J] of shape
+    (num_worlds * total_triangles,)."""
+
+    name = "wall_impacts"
+    parameters = (ParameterSpec("finnie_k", "m^3/J", 5.0e-10, (0.0, 1.0), "Finnie erosion constant k in V = k m v^2 f"),)
+    reference = "Finnie (1960) Wear 3:87"
+
+    def bind(self, ctx: BodyForceContext) -> None:
+        m = ctx.model
+        n = max(m.num_worlds * m.total_triangles, 1)
+        self.erosion = wp.zeros(n, dtype=float, device=ctx.device)
+        self.impacts = wp.zeros(n, dtype=float, device=ctx.device)
+        self.impact_energy = wp.zeros(n, dtype=float, device=ctx.device)
+
+    def zero(self) -> None:
+        for a in (self.erosion, self.impacts, self.impact_energy):
+            a.zero_()
+
+    def launch(self, ctx: BodyForceContext, state_in, state_out, dt: float) -> None:
+        m = ctx.model
+        s = ctx.solver
+        if not m.walls:
+            return
+        wp.launch(record_wall_impacts, dim=m.num_spheres, inputs=[
+            m.sphere_body, m.sphere_world, state_in.body_q, state_in.body_v, state_in.body_w, m.body_mass,
+            state_in.body_active, m.max_contacts, state_in.contact_count, state_in.contact_partner,
+            state_in.contact_wnormal, state_out.contact_count, state_out.contact_partner, state_out.contact_wnormal,
+            s.slot_point, s.slot_tri, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel, m.wall_origin,
+            m.wall_t_start, m.wall_t_stop, m.total_triangles, state_in.time, self.values["finnie_k"],
+            self.erosion, self.impacts, self.impact_energy], device=m.device)
+
+
+# ----------------------------------------------------------------------------- read-out
+FIELDS = ("energy_n", "energy_t", "impulse_n", "impulse_t")
+
+
+@dataclass
+class WearSeries:
+    """Per-component totals over time (world-summed unless noted): ``time`` (k,) [s] and, per
+    field of :data:`FIELDS` and per component, (k,) arrays."""
+
+    time: list = field(default_factory=list)
+    totals: dict = field(default_factory=dict)
+
+    def as_arrays(self) -> tuple[np.ndarray, dict[str, dict[str, np.ndarray]]]:
+        return np.asarray(self.time), {f: {c: np.asarray(v) for c, v in d.items()} for f, d in self.totals.items()}
+
+
+class WearRecorder:
+    """Reads the wall accumulators of a pump simulation: per-triangle fields, per-component
+    totals and their time series, Archard and Finnie wear.
+
+    Args:
+        sim: the Simulation; walls: indices of the pump walls in ``sim.model.walls`` whose
+            triangles carry component labels (indices into :data:`pump.geometry.COMPONENTS`).
+        impacts: the model's :class:`ImpactRecorder`, if any (for Finnie erosion).
+        zones: optional {wall index: (T,) blade zone per triangle} (:data:`BLADE_ZONES`).
+    """
+
+    def __init__(self, sim, walls: list[int], impacts: ImpactRecorder | None = None,
+                 zones: dict[int, np.ndarray] | None = None) -> None:
+        self.sim = sim
+        self.walls = list(walls)
+        self.impacts = impacts
+        self.zones = {int(k): np.asarray(v) for k, v in (zones or {}).items()}
+        m = sim.model
+        for w in self.walls:
+            wall = m.walls[w]
+            if wall.triangle_labels is None:
+                raise ConfigError(f"wall '{wall.name}' has no triangle labels; the pump walls need component labels")
+        self.series = WearSeries()
+        self.count_series: list[np.ndarray] = []
+
+    # ---------------------------------------------------------------- per triangle
+    def per_triangle(self, field: str, world: int | None = None) -> dict[int, np.ndarray]:
+        """{wall index: (T,) values} of one accumulator ('energy_n', 'energy_t', 'impulse_n',
+        'impulse_t', or 'erosion'/'impacts'/'impact_energy' from the impact recorder), summed over
+        the worlds (``world=None``) or of one world."""
+        m = self.sim.model
+        if field in FIELDS:
+            full = getattr(self.sim.solver.wall_stats, field).numpy()
+        elif self.impacts is not None and field in ("erosion", "impacts", "impact_energy"):
+            full = getattr(self.impacts, field).numpy()
+        else:
+            raise ConfigError(f"unknown wear field '{field}'; valid: {list(FIELDS)} + erosion, impacts, impact_energy "
+                              f"(with an ImpactRecorder)")
+        a = full[: m.num_worlds * m.total_triangles].reshape(m.num_worlds, m.total_triangles).astype(np.float64)
+        a = a.sum(axis=0) if world is None else a[world]
+        return {w: a[m.walls[w].tri_offset: m.walls[w].tri_offset + m.walls[w].num_triangles] for w in self.walls}
+
+    def labels(self) -> dict[int, np.ndarray]:
+        return {w: np.asarray(self.sim.model.walls[w].triangle_labels) for w in self.walls}
+
+    def areas(self) -> dict[int, np.ndarray]:
+        out = {}
+        for w in self.walls:
+            wall = self.sim.model.walls[w]
+            v, f = wall.vertices, wall.faces
+            out[w] = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        return out
+
+    def per_component(self, field: str, world: int | None = None) -> dict[str, float]:
+        """Total of one field per component (all pump walls together)."""
+        vals = self.per_triangle(field, world)
+        labs = self.labels()
+        out = {c: 0.0 for c in COMPONENTS}
+        for w, v in vals.items():
+            for k, c in enumerate(COMPONENTS):
+                out[c] += float(v[labs[w] == k].sum())
+        return {c: v for c, v in out.items() if any((labs[w] == COMPONENTS.index(c)).any() for w in labs)}
+
+    def triangles_per_component(self) -> dict[str, int]:
+        labs = self.labels()
+        out = {c: int(sum((l == k).sum() for l in labs.values())) for k, c in enumerate(COMPONENTS)}
+        return {c: n for c, n in out.items() if n > 0}
+
+    def cumulative_force(self, world: int | None = None, average: bool = True) -> dict[str, dict[str, float]]:
+        """Cumulative contact force sum_steps |F| [N] per component, normal and tangential;
+        ``average``: divided by the component's number of triangles (the paper's Fig. 18)."""
+        dt = self.sim.dt
+        n_tri = self.triangles_per_component()
+        out = {}
+        for kind, fld in (("normal", "impulse_n"), ("tangential", "impulse_t")):
+            tot = self.per_component(fld, world)
+            out[kind] = {c: v / dt / (n_tri[c] if average else 1) for c, v in tot.items()}
+        return out
+
+    def archard_volume(self, wear_coefficient: float, hardness: float, world: int | None = None) -> dict[int, np.ndarray]:
+        """Archard volume per triangle V = (K / H) E_t / mu_pw [m^3] (see module doc)."""
+        if not (wear_coefficient > 0 and hardness > 0):
+            raise ConfigError(f"Archard needs wear_coefficient > 0 and hardness > 0 Pa, got {wear_coefficient}, {hardness}")
+        mu = self.sim.model.get_contact_parameter("mu_s_pw")
+        m = self.sim.model
+        e_t = getattr(self.sim.solver.wall_stats, "energy_t").numpy()[: m.num_worlds * m.total_triangles]
+        e_t = e_t.reshape(m.num_worlds, m.total_triangles).astype(np.float64)
+        if np.any(mu <= 0):
+            raise ConfigError("Archard wear from the tangential energy needs mu_s_pw > 0 in every world")
+        s = e_t / mu[:, None]  # sum F_n * sliding distance per world [N m]
+        s = s.sum(axis=0) if world is None else s[world]
+        k = wear_coefficient / hardness
+        return {w: k * s[m.walls[w].tri_offset: m.walls[w].tri_offset + m.walls[w].num_triangles] for w in self.walls}
+
+    # ---------------------------------------------------------------- time series
+    def sample(self) -> None:
+        """Append the current per-component totals (all worlds) to the time series."""
+        self.series.time.append(self.sim.time)
+        for f in FIELDS:
+            tot = self.per_component(f)
+            d = self.series.totals.setdefault(f, {})
+            for c, v in tot.items():
+                d.setdefault(c, []).append(v)
+
+    def blade_zone_totals(self, field: str) -> dict[str, float]:
+        """Totals of one field over the blade zones (leading edge, pressure/suction side,
+        trailing edge) and their areas [m^2] (key '<zone>_area')."""
+        out = {}
+        vals = self.per_triangle(field)
+        areas = self.areas()
+        for w in self.walls:
+            zone = self.zones.get(w)
+            if zone is None:
+                continue
+            for k, z in enumerate(BLADE_ZONES[1:], start=1):
+                sel = zone == k
+                out[z] = out.get(z, 0.0) + float(vals[w][sel].sum())
+                out[z + "_area"] = out.get(z + "_area", 0.0) + float(areas[w][sel].sum())
+        return out
