@@ -840,6 +840,10 @@ def _observable(V: _V, exp: str, cond: str, quantity: str, d: Any, key: str) -> 
     d = V.mapping(d, key)
     V.keys(d, _V2_OBS_KEYS, key, required=("unit",))
     unit, factor = _unit(V, quantity, d, f"{key}.unit")
+    if unit != "deg":
+        for k in _ANGLE_ONLY_KEYS:
+            if k in d:
+                raise V.err(f"{key}.{k}", f"only for angles (unit deg), not for {quantity} in {unit}")
     data_given = [k for k in _V2_DATA_KEYS if k in d]
     censor_given = [k for k in _V2_CENSOR_KEYS if k in d]
     if len(data_given) > 1:
@@ -848,10 +852,6 @@ def _observable(V: _V, exp: str, cond: str, quantity: str, d: Any, key: str) -> 
         raise V.err(key, "give no_pile or below_detection, not both")
     if not data_given and not censor_given:
         raise V.err(key, f"missing field: one of {', '.join(_V2_DATA_KEYS + _V2_CENSOR_KEYS)}")
-    if unit != "deg":
-        for k in _ANGLE_ONLY_KEYS:
-            if k in d:
-                raise V.err(f"{key}.{k}", f"only for angles (unit deg), not for {quantity} in {unit}")
     rec = ObservableRecord(
         experiment=exp, condition=cond, quantity=quantity, unit=unit,
         data=data_given[0] if data_given else "censored",
