@@ -82,3 +82,47 @@ def test_cuda_clumps_match_cpu():
         return sim.state.body_q.numpy()
 
     np.testing.assert_allclose(run("cuda"), run("cpu"), atol=5e-5)
+
+
+@pytest.mark.parametrize("law", [dict(rolling="epsd2", cohesion="sjkr"), dict(rolling="epsd", cohesion="sjkr2")])
+def test_cuda_effects_match_cpu(law):
+    """The new effect sub-models (LIGGGHTS epsd2 rolling, SJKR cohesion) give the CPU's physics on CUDA."""
+    needs_cuda()
+
+    def run(device):
+        b = wd.ModelBuilder(num_worlds=2, contact_law=wd.ContactLaw(**law))
+        b.add_material(wd.GRAVEL)
+        g = np.arange(4) * 0.02 + 0.01
+        pos = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+        pos[:, :2] += np.random.default_rng(0).uniform(-1e-3, 1e-3, (len(pos), 2))
+        for w in range(2):
+            b.add_spheres(pos, R, "gravel", world=w)
+        b.add_wall(geometry.open_box((-0.005, -0.005, 0), (0.085, 0.085, 0.2)), "gravel")
+        b.set_contact_parameters(mu_s_pp=0.4, mu_r_pp=[0.05, 0.2], mu_r_pw=0.1,
+                                 cohesion_energy_density_pp=[2e4, 8e4], cohesion_energy_density_pw=5e4)
+        sim = wd.Simulation(b.finalize(device), 5e-5, use_graph=False)
+        sim.run(200)
+        return sim.state.body_q.numpy()
+
+    np.testing.assert_allclose(run("cuda"), run("cpu"), atol=2e-5)
+
+
+def test_cuda_elongated_rods_match_cpu():
+    needs_cuda()
+    from warpdem.shape_families import shape_family
+
+    tpl = shape_family("elongated").template(0.018, 2661.0, aspect_ratio=2.0)
+
+    def run(device):
+        b = wd.ModelBuilder(num_worlds=1)
+        b.add_material(wd.GRAVEL)
+        g = np.arange(3) * 0.04 + 0.03
+        pos = np.stack(np.meshgrid(g, g, [0.03, 0.08], indexing="ij"), -1).reshape(-1, 3)
+        rot = wd.random_quaternions(len(pos), np.random.default_rng(3))
+        b.add_clumps(tpl, pos, "gravel", world=0, rotations=rot)
+        b.add_wall(geometry.open_box((0, 0, 0), (0.15, 0.15, 0.3)), "gravel")
+        sim = wd.Simulation(b.finalize(device), 2e-5, use_graph=False)
+        sim.run(300)
+        return sim.state.body_q.numpy()
+
+    np.testing.assert_allclose(run("cuda"), run("cpu"), atol=5e-5)

@@ -258,7 +258,9 @@ class Experiment:
         processes load them again).
     contact_defaults: parameters applied to every world before its own set (spec "Default
         material": restitution 0.6 for all pairs).
-    dt: time step [s] (None: ``warpdem.time_step_limits(model).recommended``); v_ref: impact
+    dt: time step [s] (None: ``warpdem.time_step_limits(model).recommended``);
+        dt_rayleigh_fraction: the step as a fraction of the smallest sphere's Rayleigh time
+        (capped by the stability limit; for time-step convergence studies); v_ref: impact
         speed of the stability check [m/s]; force_dt: accept dt above the limit.
     ke_per_particle: settled criterion [J] (spec A: 1e-6); fill_settle_max_time [s] (spec A: 1.5;
         extended by the fall time when the loose column stands above the walls).
@@ -282,6 +284,7 @@ class Experiment:
     plugins: tuple[str, ...] = ()
     contact_defaults: dict[str, float] = field(default_factory=lambda: {"restitution_pp": 0.6, "restitution_pw": 0.6})
     dt: float | None = None
+    dt_rayleigh_fraction: float | None = None
     v_ref: float = 2.0
     force_dt: bool = False
     ke_per_particle: float = 1.0e-6
@@ -331,6 +334,10 @@ class Experiment:
         self._check_nonnegative("fill_settle_max_time")
         if self.dt is not None:
             self._check_positive("dt")
+        if self.dt_rayleigh_fraction is not None:
+            self._check_positive("dt_rayleigh_fraction")
+            if self.dt is not None:
+                raise ConfigError(f"{self.name}: give dt or dt_rayleigh_fraction, not both")
         if int(self.max_contacts) < 1:
             raise ConfigError(f"{self.name}: max_contacts must be >= 1, got {self.max_contacts}")
         if self.max_neighbours is not None and int(self.max_neighbours) < 1:
@@ -503,7 +510,12 @@ class Experiment:
         # a settled (poured) fill starts with its contacts' small Hertz overlaps: check leniently
         model = builder.finalize(device, overlap_tolerance=1.0 if any(f.settled for f in fills) else 0.05)
         limits = wd.time_step_limits(model, self.v_ref)
-        dt = self.dt if self.dt is not None else limits.recommended
+        if self.dt is not None:
+            dt = self.dt
+        elif self.dt_rayleigh_fraction is not None:
+            dt = min(float(self.dt_rayleigh_fraction) * limits.rayleigh, limits.limit)
+        else:
+            dt = limits.recommended
         sim = wd.Simulation(model, dt, v_ref=self.v_ref, force=self.force_dt, max_neighbours=max_neighbours)
         return model, sim, dt, limits
 
