@@ -7,7 +7,9 @@ The fill-to-fill noise of each observable is the pooled standard deviation over 
     s_p^2 = sum_k sum_r (y_kr - mean_k)^2 / sum_k (n_k - 1),
 
 the textbook pooled variance (e.g. Montgomery, *Design and Analysis of Experiments*, Sec. 2.4),
-which assumes the noise does not depend on the parameters.
+which assumes the noise does not depend on the parameters.  Sets whose replicates are all
+identical are left out: that is a clipped output (no pile: angle 0 in every fill), not a
+noiseless one, and counting it would shrink the estimate.
 """
 
 from __future__ import annotations
@@ -78,19 +80,23 @@ def evaluate_sets(version: ModelVersion, runner: ForwardRunner, keys: Sequence[s
 def pooled_noise_sd(Y: np.ndarray, keys: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Pooled fill-to-fill standard deviation per observable and its degrees of freedom.
 
-    Y : (n_sets, replicates, m), NaN ignored.  Returns ``(sd (m,), dof (m,))``.
+    Y : (n_sets, replicates, m), NaN ignored.  Returns ``(sd (m,), dof (m,))``; an observable whose
+    replicates are identical in every set gets sd 0 and dof 0.
     Raises if an observable has no set with two successful replicates.
     """
     Y = np.asarray(Y, float)
     ok = np.isfinite(Y)
     n_k = ok.sum(axis=1)  # (n, m)
+    if np.any(np.all(n_k < 2, axis=0)):
+        bad = [keys[j] if j < len(keys) else str(j) for j in np.flatnonzero(np.all(n_k < 2, axis=0))]
+        raise ValueError(f"cannot measure the DEM fill-to-fill noise of {bad}: no parameter set has two successful "
+                         "replicates (use replicates >= 2)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         mean_k = np.nanmean(Y, axis=1, keepdims=True)
-    ss = np.nansum(np.where(ok, (Y - mean_k) ** 2, 0.0), axis=(0, 1))
-    dof = np.sum(np.clip(n_k - 1, 0, None), axis=0)
-    if np.any(dof == 0):
-        bad = [keys[j] if j < len(keys) else str(j) for j in np.flatnonzero(dof == 0)]
-        raise ValueError(f"cannot measure the DEM fill-to-fill noise of {bad}: no parameter set has two successful "
-                         "replicates (use replicates >= 2)")
-    return np.sqrt(ss / dof), dof.astype(float)
+        spread = np.nanmax(Y, axis=1) - np.nanmin(Y, axis=1)  # (n, m)
+    varying = (n_k >= 2) & (spread > 0)
+    ss = np.sum(np.where(varying, np.nansum(np.where(ok, (Y - mean_k) ** 2, 0.0), axis=1), 0.0), axis=0)
+    dof = np.sum(np.where(varying, n_k - 1, 0), axis=0).astype(float)
+    sd = np.sqrt(np.divide(ss, dof, out=np.zeros_like(ss), where=dof > 0))
+    return sd, dof

@@ -173,14 +173,15 @@ def _residual(study: ModelStudy) -> np.ndarray:
 
 
 def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs: Observations, runner: ForwardRunner,
-                model: ForwardModel, settings: DiagnosisSettings, seed: int) -> RankingRound:
+                model: ForwardModel, settings: DiagnosisSettings, seed: int,
+                noise: tuple[np.ndarray, np.ndarray]) -> RankingRound:
     """Study every candidate on top of ``current``, rank, detect a tie and try to resolve it."""
     labels = [o.name for o in obs]
     z_now = _residual(current)
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
     results = []
     for i, eff in enumerate(candidates):
-        st = study_model(current.version.with_effect(eff), obs, runner, settings, seed + 17 * (i + 1))
+        st = study_model(current.version.with_effect(eff), obs, runner, settings, seed + 17 * (i + 1), noise=noise)
         log_b = st.evidence.log_evidence - current.evidence.log_evidence
         sig = effect_signature(current, st, eff, z_now)
         z_after = np.where(np.isfinite(st.confirmation.z), st.confirmation.z, st.best.z)
@@ -250,6 +251,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     seconds: dict[str, float] = {}
     base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed)
     seconds["base_study"] = base.seconds
+    base_noise = (base.noise_sd, base.noise_dof)  # one variance model for every version (validation.study)
     versions = [base]
     history = ErrorHistory((_errors(base, settings),))
     rounds: list[RankingRound] = []
@@ -262,17 +264,18 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         if not remaining or not (inadequate or forced or settings.rank_when_adequate):
             break
         t0 = time.perf_counter()
-        rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, settings.seed + 1000 * (step + 1))
+        rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, settings.seed + 1000 * (step + 1),
+                          base_noise)
         seconds["ranking"] += time.perf_counter() - t0
         top = rnd.top
         if forced:
             chosen, reason = forced.pop(0), "added as requested (settings.add)"
         elif not inadequate:
             chosen, reason = None, f"the {current.name} is adequate: no effect is needed"
-        elif top.log_bayes <= 0:
-            chosen, reason = None, (f"no candidate raises the evidence over the {current.name} "
-                                    f"(best: {top.effect.words}, ln B = {top.log_bayes:+.1f}): the missing effect is "
-                                    "not among the candidates")
+        elif top.log_bayes <= settings.tie_log_bayes:
+            chosen, reason = None, (f"no candidate raises the evidence over the {current.name} by more than a bare "
+                                    f"mention (best: {top.effect.words}, ln B = {top.log_bayes:+.1f} <= "
+                                    f"{settings.tie_log_bayes:.2f}): the missing effect is not among the candidates")
         elif len(rnd.tied) >= 2:
             chosen = top.name
             words = {c.name: c.effect.words for c in rnd.candidates}
@@ -286,7 +289,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
             break
         pick = next(c for c in rnd.candidates if c.name == chosen)
         t0 = time.perf_counter()
-        recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500)
+        recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise)
         seconds["recalibration"] += time.perf_counter() - t0
         versions.append(recal)
         history = history.appended(_errors(recal, settings))

@@ -30,7 +30,8 @@ class DiagnosisSettings:
     cutoff : implausibility cut-off (3: Pukelsheim's 3-sigma rule; Vernon et al. 2010).
     within_sigma : |z| counted as "within" in sentences and the error history (2).
     tie_log_bayes : top candidates whose ln Z differ by less than this are tied and need a new
-        measurement (ln 3: Kass & Raftery's "not worth more than a bare mention", B < 3).
+        measurement (ln 3: Kass & Raftery's "not worth more than a bare mention", B < 3); an
+        effect is only added when its ln B over the current model exceeds it.
     separation_sigma : a proposed measurement separates two tied candidates when their predicted
         outcomes differ by at least this many combined sds (2).
     max_added_effects : how many effects may be added in turn (base, base+A, base+A+B, ...).

@@ -1,6 +1,13 @@
 """Everything learned about one model version: design, noise, surrogates, best fit, adequacy,
 evidence and a DEM confirmation at the best fit (stages 1-4 for one version).
 
+The DEM noise is measured on the base model's design and then used by every model version
+(``noise=`` of :func:`study_model`): one variance model for all versions is what makes their
+likelihoods, evidences and error histories comparable -- separate estimates from a few replicates
+each differ by 20-30 % by chance, and a badly wrong model's likelihood follows that, not the
+physics.  A version's own replicates are used only for observables whose base-model replicates
+never varied (e.g. a pile angle where the base model forms no pile).
+
 The confirmation runs the forward model at the surrogate's best fit with ``confirm_replicates``
 fresh fills; its residuals use the mean of those runs in place of the surrogate
 (``Var_sim = s_DEM^2 / R``, :mod:`validation.misfit`), so every number reported as "after
@@ -129,8 +136,13 @@ class ModelStudy:
 
 
 def study_model(version: ModelVersion, observations: Observations, runner: ForwardRunner,
-                settings: DiagnosisSettings, seed: int, design: DesignData | None = None, waves: int = 1) -> ModelStudy:
-    """Design (unless given), noise, surrogates, scan, best fit, adequacy, evidence, confirmation."""
+                settings: DiagnosisSettings, seed: int, design: DesignData | None = None, waves: int = 1,
+                noise: tuple[np.ndarray, np.ndarray] | None = None) -> ModelStudy:
+    """Design (unless given), noise, surrogates, scan, best fit, adequacy, evidence, confirmation.
+
+    noise : (sd, dof) per observable to use instead of this design's own estimate (module
+        docstring); observables with dof 0 there fall back to this design's estimate.
+    """
     t0 = time.perf_counter()
     keys = observations.keys
     space = version.space
@@ -138,7 +150,11 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
         n = max(settings.min_design_points, settings.design_points_per_parameter * space.dim)
         design = run_design(version, runner, keys, n, settings.replicates, seed)
     noise_sd, noise_dof = pooled_noise_sd(design.Y, keys)
-    misfit = Misfit.build(observations, noise_sd, settings.model_discrepancy)
+    if noise is not None:
+        given_sd, given_dof = (np.asarray(a, float) for a in noise)
+        use = given_dof > 0
+        noise_sd, noise_dof = np.where(use, given_sd, noise_sd), np.where(use, given_dof, noise_dof)
+    misfit = Misfit.build(observations, noise_sd, settings.model_discrepancy, noise_dof)
     surrogates = fit_surrogates(space, design, noise_sd, settings.gp_restarts, settings.cv_folds, seed)
     scan = scan_box(surrogates, misfit, settings.scan_points, seed)
     best = find_best_fit(surrogates, misfit, scan)
@@ -165,7 +181,8 @@ def _maximin_subset(U: np.ndarray, n: int, first: np.ndarray) -> np.ndarray:
 
 
 def refine_study(study: ModelStudy, observations: Observations, runner: ForwardRunner,
-                 settings: DiagnosisSettings, seed: int) -> ModelStudy:
+                 settings: DiagnosisSettings, seed: int, noise: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> ModelStudy:
     """A second history-matching wave: ``refine_points`` new sets spread (maximin) over the
     non-implausible part of the scan (or the lowest-implausibility 2 % if it is empty), then the
     whole study is redone on the joined design."""
@@ -179,6 +196,6 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
     new = evaluate_sets(study.version, runner, observations.keys, study.version.space.from_unit(U_new),
                         settings.replicates)
     refined = study_model(study.version, observations, runner, settings, seed, study.design.extended(new),
-                          waves=study.waves + 1)
+                          waves=study.waves + 1, noise=noise)
     refined.seconds += study.seconds
     return refined

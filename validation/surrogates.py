@@ -62,14 +62,19 @@ class ObservableSurrogate:
         self.n_train = 0
 
     def _kernel(self, noise_fraction: float):
+        # the replicates measured the noise of the training means: the white term may not fall far below it
+        # (else the GP explains noise as signal with short length scales)
+        start = float(np.clip(noise_fraction, 1e-6, 0.5))
+        lower = float(np.clip(0.5 * noise_fraction, 1e-8, 0.9))
         return (ConstantKernel(1.0, (1e-3, 1e3))
-                * Matern(length_scale=np.full(self.dim, 0.5), length_scale_bounds=(0.03, 30.0), nu=2.5)
-                + WhiteKernel(noise_level=float(np.clip(noise_fraction, 1e-6, 0.5)), noise_level_bounds=(1e-8, 1.0)))
+                * Matern(length_scale=np.full(self.dim, 0.5), length_scale_bounds=(0.1, 30.0), nu=2.5)
+                + WhiteKernel(noise_level=max(start, lower), noise_level_bounds=(lower, max(1.0, 2.0 * noise_fraction))))
 
     def fit(self, U: np.ndarray, y: np.ndarray, noise_var_hint: float = 0.0) -> "ObservableSurrogate":
         """Fit on unit-cube inputs ``U`` (n, d) and responses ``y`` (n,); NaN rows are dropped.
 
-        noise_var_hint : expected variance of the training means (unit^2), starting value of the white term.
+        noise_var_hint : variance of the training means from the replicates (unit^2): start of the white
+            term, and half of it is its lower bound.
         """
         U, y = np.atleast_2d(np.asarray(U, float)), np.asarray(y, float)
         keep = np.isfinite(y)
