@@ -159,6 +159,12 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         base_dir=base_dir)
     if not cfg.responses:
         raise ConfigError(f"{source}: 'responses' is empty")
+    for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
+        t = resp.target
+        if isinstance(t, Mapping) and isinstance(t.get("dem_at"), Mapping):
+            # DEM targets at known parameters: names and values checked now, not after the design ran
+            for k, v in t["dem_at"].items():
+                model.check_value(k, v, f"{source}: response '{resp.name}' target dem_at")
     if not 0 <= cfg.held_out < cfg.samples - len(plist):
         raise ConfigError(f"{source}: design.held_out ({cfg.held_out}) must leave more training samples than "
                           f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
