@@ -502,3 +502,11 @@ def test_v2_images_measured(tmp_path):
     np.testing.assert_allclose(angle.repeats, angles, atol=0.5)
     assert density.repeats == (1560.0, 1570.0)
     assert len(list((tmp_path / "diag").glob("*.png"))) == 2
+
+
+def test_docs_example_matches_the_example_file():
+    text = (Path(__file__).resolve().parents[1] / "docs" / "measurement_format.md").read_text()
+    blocks = [b.split("```", 1)[0] for b in text.split("```yaml\n")[1:]]
+    (doc,) = [b for b in blocks if b.startswith(f"format: {FORMAT_V2}\ntitle:")]
+    strip = lambda recs: [(r.key, r.unit, r.repeats, r.settings, r.n_censored, r.censor_limit) for r in recs]  # noqa: E731
+    assert strip(parse_measurements(yaml.safe_load(doc)).observations()) == strip(load_measurements(EXAMPLE).observations())
