@@ -508,5 +508,7 @@ def test_docs_example_matches_the_example_file():
     text = (Path(__file__).resolve().parents[1] / "docs" / "measurement_format.md").read_text()
     blocks = [b.split("```", 1)[0] for b in text.split("```yaml\n")[1:]]
     (doc,) = [b for b in blocks if b.startswith(f"format: {FORMAT_V2}\ntitle:")]
-    strip = lambda recs: [(r.key, r.unit, r.repeats, r.settings, r.n_censored, r.censor_limit) for r in recs]  # noqa: E731
-    assert strip(parse_measurements(yaml.safe_load(doc)).observations()) == strip(load_measurements(EXAMPLE).observations())
+    def numbers(mf):
+        return [(r.key, r.unit, r.repeats, r.settings, r.n_censored, r.censor_limit) for r in mf.observations()]
+
+    assert numbers(parse_measurements(yaml.safe_load(doc))) == numbers(load_measurements(EXAMPLE))

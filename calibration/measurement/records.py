@@ -801,7 +801,8 @@ def _material(V: _V, d: Any, key: str) -> dict[str, Any]:
         ds = V.numbers(dia, f"{key}.diameter", lo=0.0, lo_open=True) if isinstance(dia, list) \
             else [V.number(dia, f"{key}.diameter", lo=0.0, lo_open=True)]
         if len(ds) > 2 or ds[0] > ds[-1]:
-            raise V.err(f"{key}.diameter", f"expected a diameter [m] or [d_min, d_max] with d_min <= d_max, got {dia!r}")
+            raise V.err(f"{key}.diameter",
+                        f"expected a diameter [m] or [d_min, d_max] with d_min <= d_max, got {dia!r}")
     return dict(d)
 
 
