@@ -286,6 +286,9 @@ def test_settings_checked_against_experiments(tmp_path, raw):
     d = copy.deepcopy(raw)
     d["experiments"]["drum"]["conditions"]["15rpm"]["settings"]["dt"] = 1e-5
     expect(d, f"{K15}.settings.dt", "sets up the simulation", experiments="registered")
+    d = copy.deepcopy(raw)
+    d["experiments"]["cylinder"]["conditions"]["lab"]["settings"]["sections"] = 32
+    expect(d, f"{KCL}.settings.sections", "sets up the simulation", experiments="registered")
     # a plain mapping of setting names
     expect(raw, f"{K15}.settings.diameter", "unknown setting 'diameter'",
            experiments={"drum": {"rpm"}, "baffle": set(), "cylinder": set()})

@@ -147,8 +147,10 @@ NO_PILE_LIMIT_DEG = 3.0
 #: base-experiment fields that are no condition setting: the model and the numerics (never a lab
 #: protocol) and ``material`` (stated once, at the top of a v2 file)
 SIMULATION_SETTINGS = frozenset({
-    "scale", "material", "contact_law", "plugins", "contact_defaults", "dt", "v_ref", "force_dt",
-    "max_contacts", "max_neighbours", "overflow_retries", "seed", "fill_per_world", "first_fill_index",
+    "scale", "material", "contact_law", "plugins", "contact_defaults", "dt", "dt_rayleigh_fraction", "v_ref",
+    "force_dt", "max_contacts", "max_neighbours", "overflow_retries", "seed", "fill_per_world", "first_fill_index",
+    "ke_per_particle", "fill_settle_max_time", "settle_check_interval", "removal_interval", "sections",
+    "max_skipped_snapshots",
 })
 _ORIGIN_DEFAULT = "lab"
 _V2_TOP_KEYS = {"format", "title", "source", "notes", "material", "experiments"}
