@@ -272,6 +272,7 @@ def test_tie_names_the_condition_that_separates(tie):
     f = by_key["drum/60rpm/dynamic_angle"]
     assert f.means["shape"] - f.means["rolling_resistance"] > 2.0
     assert "drum angle at 60 rpm" in tie.next_steps[0] and "provisionally" in rnd.reason
+    assert "provisional: particle shape fits as well" in tie.headline and "drum angle at 60 rpm" in tie.headline
 
 
 def test_data_cannot_separate_is_said_not_guessed(tie):

@@ -131,7 +131,7 @@ def judge_adequacy(surrogates: SurrogateSet, misfit: Misfit, scan: SurrogateScan
         n_pl = int(np.sum(plausible_rows[:n_scanned]))
         frac = n_pl / n_scanned
         span = "; ".join(f"{n} {lo:.3g}-{hi:.3g}" for n, (lo, hi) in ranges.items())
-        sentence = (f"No effect is needed: {frac:.1%} of the parameter box reproduces every measurement within "
+        sentence = (f"The model is adequate: {frac:.1%} of the parameter box reproduces every measurement within "
                     f"implausibility {cutoff:g} (smallest maximum implausibility {mm:.2f}); plausible ranges: {span}.")
     else:
         n_pl, frac = 0, 0.0

@@ -331,6 +331,14 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         headline = (f"{lead}with {added} added, {state} (DEM at the recalibrated best fit, largest |z| "
                     f"{last.max_abs_z:.1f})")
         headline = headline[0].upper() + headline[1:]
+        tied_round = next((r for r in rounds if r.discrimination is not None and r.chosen is not None), None)
+        if tied_round is not None:
+            d = tied_round.discrimination
+            words = {c.name: c.effect.words for c in tied_round.candidates}
+            others = " and ".join(words[n] for n in d.candidates if n != tied_round.chosen)
+            headline += (f"; provisional: {others} fits as well"
+                         + (f" -- measure the {d.forecasts[0].proposal.name} to decide" if d.recommended
+                            else " and no proposed measurement separates them"))
         steps.append(f"Enable {added} in the model configuration (add: {list(final.version.effect_names)}) with the "
                      "recalibrated parameters: " + ", ".join(f"{k} = {v:.3g}" for k, v in final.best_parameters.items())
                      + ".")

@@ -3,9 +3,10 @@
 Choice and why.  The evidence (marginal likelihood) of a model version M with parameters u in
 the unit cube and a uniform prior over its box is
 
-    Z_M = integral_{[0,1]^k} L(u) du,     ln L(u) = -1/2 sum_i [z_i(u)^2 + ln(2 pi sigma_i(u)^2)]
+    Z_M = integral_{[0,1]^k} L(u) du
 
-(:mod:`validation.misfit`), and ``B = Z_{M+effect} / Z_M`` is the Bayes factor.  It charges for
+with L the likelihood of the measured means on the surrogates (Student t in z_i(u), with the
+measurement's and DEM noise's degrees of freedom: :mod:`validation.misfit`), and ``B = Z_{M+effect} / Z_M`` is the Bayes factor.  It charges for
 added parameters by the **Occam factor** -- the fraction of the effect's prior range the data
 allow -- rather than by a count: BIC (k ln n) is an asymptotic approximation that is meaningless
 with as few data as parameters (6 observables, 4-6 parameters here), and AIC/BIC charge the same
