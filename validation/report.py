@@ -7,7 +7,6 @@ what to measure next, error history; then surrogate quality and the forward-mode
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
