@@ -82,6 +82,7 @@ def record_wall_impacts(
     erosion: wp.array(dtype=float),
     impacts: wp.array(dtype=float),
     impact_energy: wp.array(dtype=float),
+    max_normal_speed: wp.array(dtype=float),
 ):
     """New wall contacts of this step -> Finnie erosion, impact count and normal impact
     energy 1/2 m v_n^2 per triangle (index world * T + triangle)."""
@@ -120,6 +121,7 @@ def record_wall_impacts(
         wp.atomic_add(erosion, idx, finnie_k * m * wp.dot(v_rel, v_rel) * finnie_angle_function(alpha))
         wp.atomic_add(impacts, idx, 1.0)
         wp.atomic_add(impact_energy, idx, 0.5 * m * v_n * v_n)
+        wp.atomic_max(max_normal_speed, 0, v_n)
 
 
 @register_body_force
@@ -138,9 +140,10 @@ class ImpactRecorder(BodyForceModel):
         self.erosion = wp.zeros(n, dtype=float, device=ctx.device)
         self.impacts = wp.zeros(n, dtype=float, device=ctx.device)
         self.impact_energy = wp.zeros(n, dtype=float, device=ctx.device)
+        self.max_normal_speed = wp.zeros(1, dtype=float, device=ctx.device)  # largest v_n of any impact [m/s]
 
     def zero(self) -> None:
-        for a in (self.erosion, self.impacts, self.impact_energy):
+        for a in (self.erosion, self.impacts, self.impact_energy, self.max_normal_speed):
             a.zero_()
 
     def launch(self, ctx: BodyForceContext, state_in, state_out, dt: float) -> None:
@@ -154,7 +157,7 @@ class ImpactRecorder(BodyForceModel):
             state_in.contact_wnormal, state_out.contact_count, state_out.contact_partner, state_out.contact_wnormal,
             s.slot_point, s.slot_tri, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel, m.wall_origin,
             m.wall_t_start, m.wall_t_stop, m.total_triangles, state_in.time, self.values["finnie_k"],
-            self.erosion, self.impacts, self.impact_energy], device=m.device)
+            self.erosion, self.impacts, self.impact_energy, self.max_normal_speed], device=m.device)
 
 
 # ----------------------------------------------------------------------------- read-out
