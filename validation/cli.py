@@ -27,10 +27,14 @@ def _material_of_measurements(path: Path):
     from calibration.measurement.records import load_measurements
 
     mf = load_measurements(path)
-    mat = getattr(mf, "material", None)
+    mat = getattr(mf, "material", None) or None
     if mat is None or isinstance(mat, BulkMaterial):
         return mat
     return BulkMaterial.from_config(dict(mat))
+
+
+def _relative(p: Path, base_dir: Path) -> Path:
+    return p if p.is_absolute() else base_dir / p
 
 
 def _preset_material(cfg):
@@ -130,14 +134,40 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     proposals = _proposals(cfg, list(observations))
     specs += [ObservableSpec(p.key, p.experiment, p.quantity, condition_settings(p.experiment, dict(p.condition)))
               for p in proposals]
-    out = output or Path(cfg.output or f"results/diagnosis_{cfg.name}")
-    cache = Path(cfg.cache) if cfg.cache else out / "dem_runs.jsonl"
+    # paths in the config are relative to the config's folder; --output to the working directory
+    out = output or _relative(Path(cfg.output or f"results/diagnosis_{cfg.name}"), base_dir)
+    cache = _relative(Path(cfg.cache), base_dir) if cfg.cache else out / "dem_runs.jsonl"
     forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
                               fixed=fixed, device=device or cfg.device,
                               processes=processes if processes is not None else cfg.processes, cache=cache,
                               progress=False, proposals=proposals)
     settings = DiagnosisSettings(**{**cfg.diagnosis.model_dump(), "add": tuple(dict.fromkeys(added))})
     return observations, ParameterSpace(tuple(plist)), [e.candidate for e in effects], forward, settings, out
+
+
+def _prefetch(obs, space, cands, forward, settings, which: Sequence[str]) -> int:
+    """Run (into the cache) the designs :func:`validation.diagnose.planned_designs` lists."""
+    from calibration.designs import latin_hypercube
+
+    from .diagnose import planned_designs
+    from .forward import ForwardRunner
+
+    plans = planned_designs(space, cands, settings)
+    names = {("base" if not v.effects else v.effects[-1].name): (v, n, seed) for v, n, seed in plans}
+    unknown = sorted(set(which) - set(names))
+    if unknown:
+        print(f"warpdem diagnose: --prefetch: unknown version(s) {unknown}; valid: {sorted(names)}", file=sys.stderr)
+        return 2
+    runner = ForwardRunner(forward)
+    for name in (which or list(names)):
+        v, n, seed = names[name]
+        t0 = time.perf_counter()
+        X = latin_hypercube(v.space, n, seed=seed)
+        runner(v.effect_names, v.parameter_sets(X), settings.replicates, tuple(obs.keys))
+        print(json.dumps({"prefetched": name, "sets": n, "replicates": settings.replicates,
+                          "wall_s": round(time.perf_counter() - t0, 1), "dem_worlds_run": forward.dem_worlds}),
+              flush=True)
+    return 0
 
 
 def diagnose_main(argv: Sequence[str] | None = None) -> int:
@@ -149,6 +179,10 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--processes", help="CPU worker processes ('auto' = one per core)")
     ap.add_argument("--add", action="append", default=[], metavar="EFFECT",
                     help="add this effect whatever the ranking (repeatable)")
+    ap.add_argument("--prefetch", nargs="*", metavar="VERSION",
+                    help="only run the designs the diagnosis needs before it sees the data (the base model and "
+                         "each candidate; name some, e.g. 'base rolling_resistance', to split them over processes) "
+                         "into the DEM cache, then stop")
     args = ap.parse_args(list(argv) if argv is not None else None)
     from .config import load_diagnosis_config
     from .diagnose import diagnose
@@ -164,6 +198,8 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     except (ConfigError, ValueError) as exc:
         print(f"warpdem diagnose: {exc}", file=sys.stderr)
         return 2
+    if args.prefetch is not None:
+        return _prefetch(obs, space, cands, forward, settings, args.prefetch)
     print(f"warpdem diagnose: {len(list(obs))} observables, base parameters {space.names}, candidates "
           f"{[c.name for c in cands]}; output {out}", file=sys.stderr, flush=True)
     result = diagnose(obs, space, cands, forward, settings)

@@ -41,7 +41,7 @@ from .ranking import CandidateResult, candidate_sentence, effect_signature, rank
 from .settings import DiagnosisSettings
 from .study import ModelStudy, refine_study, study_model
 
-__all__ = ["RankingRound", "DiagnosisResult", "diagnose"]
+__all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs"]
 
 
 @dataclass(frozen=True)
@@ -172,6 +172,35 @@ def _residual(study: ModelStudy) -> np.ndarray:
     return np.where(np.isfinite(zc), zc, study.best.z)
 
 
+def _candidate_seed(round_seed: int, index: int) -> int:
+    """Design seed of the ``index``-th candidate of a ranking round."""
+    return round_seed + 17 * (index + 1)
+
+
+def _round_seed(settings: DiagnosisSettings, step: int) -> int:
+    """Seed of ranking round ``step`` (0 = the first effect added)."""
+    return settings.seed + 1000 * (step + 1)
+
+
+def design_size(version: ModelVersion, settings: DiagnosisSettings) -> int:
+    """Latin-hypercube size of one model version's design."""
+    return max(settings.min_design_points, settings.design_points_per_parameter * version.space.dim)
+
+
+def planned_designs(base_space: ParameterSpace, candidates: Sequence[CandidateEffect],
+                    settings: DiagnosisSettings | None = None) -> list[tuple[ModelVersion, int, int]]:
+    """(model version, number of sets, seed) of every design a diagnosis runs before it knows the
+    data: the base model and each candidate of the first ranking round. A forward model may run
+    them ahead (e.g. in parallel processes) and cache the results; :func:`diagnose` then finds them."""
+    settings = settings or DiagnosisSettings()
+    base = ModelVersion(base_space)
+    out = [(base, design_size(base, settings), settings.seed)]
+    for i, eff in enumerate(candidates):
+        v = base.with_effect(eff)
+        out.append((v, design_size(v, settings), _candidate_seed(_round_seed(settings, 0), i)))
+    return out
+
+
 def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs: Observations, runner: ForwardRunner,
                 model: ForwardModel, settings: DiagnosisSettings, seed: int,
                 noise: tuple[np.ndarray, np.ndarray]) -> RankingRound:
@@ -181,7 +210,7 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
     results = []
     for i, eff in enumerate(candidates):
-        st = study_model(current.version.with_effect(eff), obs, runner, settings, seed + 17 * (i + 1), noise=noise)
+        st = study_model(current.version.with_effect(eff), obs, runner, settings, _candidate_seed(seed, i), noise=noise)
         log_b = st.evidence.log_evidence - current.evidence.log_evidence
         sig = effect_signature(current, st, eff, z_now)
         z_after = np.where(np.isfinite(st.confirmation.z), st.confirmation.z, st.best.z)
@@ -264,7 +293,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         if not remaining or not (inadequate or forced or settings.rank_when_adequate):
             break
         t0 = time.perf_counter()
-        rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, settings.seed + 1000 * (step + 1),
+        rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, _round_seed(settings, step),
                           base_noise)
         seconds["ranking"] += time.perf_counter() - t0
         top = rnd.top

@@ -15,7 +15,8 @@ design uses. It writes, per case,
 - ``truth_<case>.json``: the hidden model and parameters, kept apart for the scoring afterwards.
 
 Scales: "paper" (spheres 16-20 mm by number, 16 kg box, paper drum, 10 kg hollow cylinder lifted
-at 0.05 m/s; GPU) and "quick" (the quick presets; a few minutes on 2 CPU cores).
+at 0.05 m/s; GPU), "quick" (the quick presets; a few minutes on 2 CPU cores) and "tiny" (a 9 kg
+baffle test only, for the smoke test of the whole chain).
 """
 from __future__ import annotations
 
@@ -60,6 +61,8 @@ def conditions(scale: str) -> dict[str, dict[str, dict[str, Any]]]:
         return {"baffle": {"16kg": {"fill_mass": 16.0}},
                 "drum": {f"{r}rpm": {"rpm": float(r), "discard": 1, "record": 3} for r in (15, 30, 45)},
                 "cylinder": {"10kg": {"fill_mass": 10.0, "lift_speed": 0.05}}}
+    if scale == "tiny":  # a smoke test of the whole chain in seconds (quick presets, small fills)
+        return {"baffle": {"9kg": {"fill_mass": 9.0, "lift_to": 0.25, "max_time_after_lift": 1.5, "min_bins": 2}}}
     return {"baffle": {"quick": {}}, "drum": {f"{r}rpm": {"rpm": float(r)} for r in (15, 30, 45)},
             "cylinder": {"quick": {}}}
 
@@ -70,7 +73,8 @@ def lab_material(scale: str) -> dict[str, Any] | None:
 
 
 def _experiment_scale(exp: str, scale: str) -> str:
-    return scale
+    """The experiment preset of a lab scale ("tiny" runs the quick presets with small fills)."""
+    return "quick" if scale == "tiny" else scale
 
 
 def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
@@ -92,7 +96,7 @@ def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, 
         for gi, (key, members) in enumerate(groups.items()):
             common = json.loads(key)
             base_mat = (BulkMaterial.from_config(mat_cfg) if mat_cfg is not None
-                        else make_experiment(exp_name, scale).bulk_material())
+                        else make_experiment(exp_name, _experiment_scale(exp_name, scale)).bulk_material())
             material = base_mat
             if spec["shape"] is not None:
                 shape = dict(spec["shape"])
@@ -154,20 +158,25 @@ def diagnosis_config(case: str, scale: str) -> dict[str, Any]:
     """A base-model diagnosis of one case: sliding frictions calibrated, every effect a candidate."""
     cfg: dict[str, Any] = {
         "name": f"hidden-{case}", "measurements": f"lab_{case}.yaml", "output": f"diagnosis_{case}",
-        "scale": scale, "model": {"contact_law": {"rolling": "none"}},
+        "scale": _experiment_scale("", scale), "model": {"contact_law": {"rolling": "none"}},
         "parameters": {"mu_s_pp": [0.1, 0.9], "mu_s_pw": [0.1, 0.9]},
         "fixed": {"restitution_pp": 0.6, "restitution_pw": 0.6},
         "candidates": "default",
     }
-    if scale == "quick":
+    if scale != "paper":
         cfg["model"]["material"] = None
+    if scale == "tiny":
+        cfg["candidates"] = ["rolling_resistance"]
+        cfg["diagnosis"] = {"design_points_per_parameter": 2, "min_design_points": 5, "replicates": 2,
+                            "confirm_replicates": 2, "refine_points": 0, "scan_points": 512,
+                            "evidence_samples": 512, "gp_restarts": 0, "cv_folds": 2}
     return cfg
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="results/hidden_effects")
-    ap.add_argument("--scale", default="paper", choices=["paper", "quick"])
+    ap.add_argument("--scale", default="paper", choices=["paper", "quick", "tiny"])
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--device", default=None)

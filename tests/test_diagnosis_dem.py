@@ -1,0 +1,79 @@
+"""The diagnosis on the real DEM, end to end, at "tiny" scale (a 9 kg quick baffle test): the lab
+generator writes a measurement file, the diagnosis reads only that file, caches every DEM world
+and resumes without repeating one; config errors are reported with their paths, exit code 2."""
+import json
+import shutil
+
+import pytest
+import yaml
+
+from validation.cli import diagnose_main
+from validation.hidden_effects import generate_case
+
+
+@pytest.fixture(scope="module")
+def tiny_lab(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("lab")
+    generate_case("rolling", folder, scale="tiny", repeats=2, device="cpu", processes=2)
+    return folder
+
+
+def test_diagnosis_reads_only_the_measurement_file_and_resumes_from_its_cache(tiny_lab, tmp_path):
+    work = tmp_path / "case"
+    work.mkdir()
+    # the diagnosis gets the measurement file and its config, never the truth
+    shutil.copy(tiny_lab / "lab_rolling.yaml", work)
+    shutil.copy(tiny_lab / "diagnose_rolling.yaml", work)
+    assert not list(work.glob("truth*"))
+    cfg = work / "diagnose_rolling.yaml"
+    assert diagnose_main([str(cfg), "--processes", "2", "--prefetch", "base"]) == 0
+    out = work / "diagnosis_rolling"
+    cache = out / "dem_runs.jsonl"
+    n_prefetched = len(cache.read_text().splitlines())
+    assert n_prefetched == 10  # 5 design sets x 2 fills, one world each (one baffle condition)
+    assert diagnose_main([str(cfg), "--processes", "2"]) == 0
+    timing = json.loads((out / "dem_timing.json").read_text())
+    assert timing["dem_worlds_run"] >= 2  # the confirmation at the best fit; the design came from the cache
+    doc = json.loads((out / "diagnosis.json").read_text())
+    assert doc["verdict"]["headline"]
+    html = (out / "report.html").read_text()
+    assert "<img" in html and doc["verdict"]["headline"].split(":")[0] in html
+    n_after = len(cache.read_text().splitlines())
+    # a repeated diagnosis runs no DEM at all
+    assert diagnose_main([str(cfg), "--processes", "2"]) == 0
+    timing2 = json.loads((out / "dem_timing.json").read_text())
+    assert timing2["dem_worlds_run"] == 0 and len(cache.read_text().splitlines()) == n_after
+    assert json.loads((out / "diagnosis.json").read_text())["verdict"]["headline"] == doc["verdict"]["headline"]
+
+
+def test_config_errors_listed_with_their_paths(tmp_path, capsys):
+    cfg = {"measurements": "nope.yaml", "parameters": {"mu_s_pp": [0.1, 0.9]},
+           "diagnosis": {"replicates": 1, "sede": 3}, "candidats": "default", "scale": "huge"}
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert diagnose_main([str(path)]) == 2
+    err = capsys.readouterr().err
+    for what in ("diagnosis.replicates", "diagnosis.sede: unknown key", "candidats: unknown key", "scale"):
+        assert what in err, err
+    assert "Traceback" not in err
+    cfg = {"measurements": "nope.yaml", "parameters": {"mu_s_pp": [0.1, 0.9]}}
+    path.write_text(yaml.safe_dump(cfg))
+    assert diagnose_main([str(path)]) == 2
+    assert "measurements: file not found" in capsys.readouterr().err
+
+
+def test_model_errors_name_the_parameter(tiny_lab, tmp_path, capsys):
+    shutil.copy(tiny_lab / "lab_rolling.yaml", tmp_path)
+    base = yaml.safe_load((tiny_lab / "diagnose_rolling.yaml").read_text())
+    cases = [({"parameters": {"mu_s_pp": [-1.0, 0.9]}}, "outside its admissible range"),
+             ({"parameters": {"mu_q_pp": [0.1, 0.9]}}, "unknown parameter 'mu_q_pp'"),
+             ({"candidates": ["magic"]}, "unknown candidate effect 'magic'"),
+             ({"effect_ranges": {"mu_r_pp": [0.1, 0.3]}}, "must contain 0.0"),
+             ({"add": ["cohesion"]}, "'cohesion' is not among the candidate effects"),
+             ({"model": {"contact_law": {"rolling": "epsd2"}}}, "already has rolling")]
+    for change, message in cases:
+        path = tmp_path / "c.yaml"
+        path.write_text(yaml.safe_dump({**base, **change}))
+        assert diagnose_main([str(path)]) == 2, change
+        err = capsys.readouterr().err
+        assert message in err, (change, err)
