@@ -59,6 +59,53 @@ def _polydata(points: np.ndarray, faces: np.ndarray):
     return pv.PolyData(np.asarray(points, dtype=np.float64), np.hstack([np.full((len(faces), 1), 3), faces]).ravel())
 
 
+_VTK_TYPES = {np.dtype(np.float32): "Float32", np.dtype(np.float64): "Float64", np.dtype(np.int32): "Int32",
+              np.dtype(np.int64): "Int64", np.dtype(np.uint8): "UInt8"}
+
+
+def _data_array(name: str, a: np.ndarray) -> str:
+    """One inline binary (base64, UInt32 byte-count header) VTK XML DataArray."""
+    import base64
+    import struct
+
+    a = np.ascontiguousarray(a)
+    if a.dtype not in _VTK_TYPES:
+        a = a.astype(np.float64 if a.dtype.kind == "f" else np.int64)
+    comps = 1 if a.ndim == 1 else a.shape[1]
+    raw = a.astype(a.dtype.newbyteorder("<")).tobytes()
+    payload = base64.b64encode(struct.pack("<I", len(raw)) + raw).decode("ascii")
+    return (f'<DataArray type="{_VTK_TYPES[a.dtype]}" Name="{name}" NumberOfComponents="{comps}" '
+            f'format="binary">{payload}</DataArray>')
+
+
+def write_vtp(path: Path, points: np.ndarray, triangles: np.ndarray | None = None,
+              point_data: dict | None = None, cell_data: dict | None = None) -> Path:
+    """Write a VTK XML PolyData file (.vtp) without VTK: triangles as polys, or the points as
+    vertices when ``triangles`` is None; fields per point / per cell (1 or 3 components)."""
+    pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    n = len(pts)
+    if triangles is None:
+        conn, offs, kind, ncell = np.arange(n, dtype=np.int64), np.arange(1, n + 1, dtype=np.int64), "Verts", n
+    else:
+        tri = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        conn, offs, kind, ncell = tri.ravel(), 3 * np.arange(1, len(tri) + 1, dtype=np.int64), "Polys", len(tri)
+    counts = {"Verts": 0, "Polys": 0}
+    counts[kind] = ncell
+    out = ['<?xml version="1.0"?>',
+           '<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian" header_type="UInt32">', "<PolyData>",
+           f'<Piece NumberOfPoints="{n}" NumberOfVerts="{counts["Verts"]}" NumberOfLines="0" NumberOfStrips="0" '
+           f'NumberOfPolys="{counts["Polys"]}">']
+    out += ["<PointData>"] + [_data_array(k, np.asarray(v)) for k, v in (point_data or {}).items()] + ["</PointData>"]
+    out += ["<CellData>"] + [_data_array(k, np.asarray(v)) for k, v in (cell_data or {}).items()] + ["</CellData>"]
+    out += ["<Points>", _data_array("Points", pts), "</Points>"]
+    for section in ("Verts", "Lines", "Strips", "Polys"):
+        if section == kind:
+            out += [f"<{section}>", _data_array("connectivity", conn), _data_array("offsets", offs), f"</{section}>"]
+    out += ["</Piece>", "</PolyData>", "</VTKFile>"]
+    Path(path).write_text("\n".join(out) + "\n")
+    return Path(path)
+
+
 class VTKWriter:
     """Writes particle and wall frames and the ``.pvd`` collections."""
 
@@ -70,32 +117,23 @@ class VTKWriter:
         self.k = 0
 
     def write_frame(self, t: float) -> None:
-        import pyvista as pv
-
         case = self.case
         sim = case.sim
         m = sim.model
         x = sim.sphere_positions()
         body = m.host["sphere_body"]
         act = sim.state.body_active.numpy()[body] != 0
-        v = sim.state.body_v.numpy()[body]
+        v = sim.state.body_v.numpy()[body].astype(np.float32)
         name = f"particles_{self.k:05d}.vtp"
-        cloud = pv.PolyData(x[act] if act.any() else np.zeros((0, 3)))
-        if act.any():
-            cloud["id"] = body[act].astype(np.int32)
-            cloud["radius"] = m.host["sphere_radius"][act]
-            cloud["velocity"] = v[act]
-            cloud["speed"] = np.linalg.norm(v[act], axis=1)
-            cloud["world"] = m.host["sphere_world"][act]
-        cloud.save(self.dir / name)
+        write_vtp(self.dir / name, x[act], point_data={
+            "id": body[act].astype(np.int32), "radius": m.host["sphere_radius"][act].astype(np.float32),
+            "velocity": v[act], "speed": np.linalg.norm(v[act], axis=1).astype(np.float32),
+            "world": m.host["sphere_world"][act].astype(np.int32)})
         self.frames["particles"].append((t, name))
         for wi, key in ((case.impeller_wall, "impeller"), (case.casing_wall, "casing")):
             w = m.walls[wi]
-            mesh = _polydata(w.mesh.points.numpy(), w.faces)
-            for f, val in wall_cell_data(case, wi).items():
-                mesh.cell_data[f] = val
             name = f"{key}_{self.k:05d}.vtp"
-            mesh.save(self.dir / name)
+            write_vtp(self.dir / name, w.mesh.points.numpy(), w.faces, cell_data=_float32(wall_cell_data(case, wi)))
             self.frames[key].append((t, name))
         self.k += 1
 
@@ -109,13 +147,12 @@ def write_wear_surfaces(case, out: Path) -> list[Path]:
     paths = []
     for wi, key, tm in ((case.impeller_wall, "impeller", case.geometry.impeller),
                         (case.casing_wall, "casing", case.geometry.casing)):
-        mesh = _polydata(tm.vertices, tm.faces)
-        for f, val in wall_cell_data(case, wi).items():
-            mesh.cell_data[f] = val
-        p = out / f"wear_{key}.vtp"
-        mesh.save(p)
-        paths.append(p)
+        paths.append(write_vtp(out / f"wear_{key}.vtp", tm.vertices, tm.faces, cell_data=wall_cell_data(case, wi)))
     return paths
+
+
+def _float32(d: dict) -> dict:
+    return {k: (v.astype(np.float32) if v.dtype.kind == "f" else v) for k, v in d.items()}
 
 
 # ----------------------------------------------------------------------------- figures
@@ -184,23 +221,36 @@ def _figure_wear_pyvista(case, path: Path) -> None:
 
 
 def _figure_wear_matplotlib(case, path: Path) -> None:
+    """Top views: flat faces (hub, back wall) as coloured triangles, vertical walls (blades,
+    spiral, duct) as coloured dots at their triangle centres (zero energy in grey)."""
+    import matplotlib
     from matplotlib.collections import PolyCollection
 
     plt = _plt()
-    fig, axs = plt.subplots(2, 2, figsize=(12, 11))
+    cmap = matplotlib.colormaps["inferno"].with_extremes(under="lightgrey")
+    fig, axs = plt.subplots(2, 2, figsize=(12, 11), constrained_layout=True)
     for row, (tm, keep, data, title) in enumerate(_wear_views(case)):
+        tri3 = tm.vertices[tm.faces]
+        nz = np.abs(np.cross(tri3[:, 1] - tri3[:, 0], tri3[:, 2] - tri3[:, 0])[:, 2])
+        flat = nz > 0.5 * 2 * tm.areas()
         for col, f in enumerate(("energy_n_per_area", "energy_t_per_area")):
             ax = axs[row, col]
-            tri = tm.vertices[tm.faces[keep]][:, :, :2]
-            vals, lo, hi = _log_field(data[f][keep])
-            pc = PolyCollection(tri, array=np.nan_to_num(vals, nan=lo - 1), cmap="inferno", clim=(lo, hi),
-                                edgecolors="none")
+            vals, lo, hi = _log_field(data[f])
+            vals = np.nan_to_num(vals, nan=lo - 1)
+            sel = keep & flat
+            pc = PolyCollection(tri3[sel][:, :, :2], array=vals[sel], cmap=cmap, clim=(lo, hi), edgecolors="face",
+                                linewidths=0.2)
             ax.add_collection(pc)
+            vert = keep & ~flat
+            cen = tm.centroids()[vert]
+            order = np.argsort(vals[vert])
+            ax.scatter(cen[order, 0], cen[order, 1], c=vals[vert][order], cmap=cmap, vmin=lo, vmax=hi, s=6,
+                       linewidths=0)
             ax.autoscale()
             ax.set_aspect("equal")
-            ax.set_title(f"{title}\n{'normal' if col == 0 else 'tangential'} energy, log10 J/m^2 (top view)")
+            ax.set_title(f"{title}\n{'normal' if col == 0 else 'tangential'} energy, log10 J/m^2 (top view; "
+                         f"dots: vertical walls)")
             fig.colorbar(pc, ax=ax, shrink=0.8)
-    fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

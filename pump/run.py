@@ -166,6 +166,9 @@ def build_case(cfg: dict) -> PumpCase:
     worlds = int(run["worlds"])
     plan = plan_injection(geo, rate, inject_until, material.max_bounding_radius, worlds=worlds,
                           t_start=float(pc["inject_from"]), seed=cfg["seed"])
+    if plan.count == 0:
+        raise ConfigError(f"the run injects no particle: {rate:.3g} particles/s from t = {pc['inject_from']} s to "
+                          f"{inject_until:.3g} s; run more revolutions or raise particles.volume_fraction")
     samples = [sample_particles(material, n=max(1, int((plan.world == w).sum())), rng=cfg["seed"] * 1000 + w)
                for w in range(worlds)]
 
