@@ -31,8 +31,8 @@ import math
 import numpy as np
 import warp as wp
 
-from warpdem.body_forces import BodyForceContext, BodyForceModel, ParameterSpec, di_felice_drag, register_body_force, \
-    schiller_naumann_drag
+from warpdem.body_forces import (BodyForceContext, BodyForceModel, ParameterSpec, di_felice_drag,
+                                 register_body_force, schiller_naumann_drag)
 from warpdem.errors import ConfigError
 
 from .flow import FlowGrid

@@ -105,7 +105,8 @@ class PumpDesign:
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"pump design: {name} must be a positive number, got {v!r}")
         if not 0.3 <= self.hydraulic_efficiency <= 1.0:
-            raise ConfigError(f"pump design: hydraulic_efficiency must lie in [0.3, 1], got {self.hydraulic_efficiency}")
+            raise ConfigError(f"pump design: hydraulic_efficiency must lie in [0.3, 1], "
+                              f"got {self.hydraulic_efficiency}")
         if int(self.blades) != self.blades or not 2 <= self.blades <= 12:
             raise ConfigError(f"pump design: blades must be an integer in 2..12, got {self.blades}")
         if not 5.0 <= self.beta1_deg <= 60.0:
@@ -210,6 +211,7 @@ class PumpDesign:
                 f"(n_q = {d['n_q']:.1f}, psi = {d['psi']:.3f} after Gulich), d2 = {d['d2'] * 1e3:.1f} mm, "
                 f"u2 = {d['u2']:.2f} m/s, z = {self.blades}, b2 = {self.outlet_width * 1e3:g} mm, "
                 f"beta1B = {self.beta1_deg:g} deg, beta2B = {d['beta2_blade_deg']:.1f} deg, Wiesner slip "
-                f"{d['slip_factor']:.3f}, Euler head {d['euler_head']:.2f} m (H/eta_h = {d['design_euler_head']:.2f} m), "
+                f"{d['slip_factor']:.3f}, Euler head {d['euler_head']:.2f} m "
+                f"(H/eta_h = {d['design_euler_head']:.2f} m), "
                 f"volute r3 = {d['r3'] * 1e3:.1f} mm, throat {self.throat_height * 1e3:g} x {d['b3'] * 1e3:g} mm, "
                 f"K_v / K_2 = {d['k_volute'] / d['k_impeller']:.2f}")

@@ -297,7 +297,8 @@ class FlowGrid:
         for dx in (0, 1):
             for dy in (0, 1):
                 for dz in (0, 1):
-                    w = (f[:, 0] if dx else 1 - f[:, 0]) * (f[:, 1] if dy else 1 - f[:, 1]) * (f[:, 2] if dz else 1 - f[:, 2])
+                    w = ((f[:, 0] if dx else 1 - f[:, 0]) * (f[:, 1] if dy else 1 - f[:, 1])
+                         * (f[:, 2] if dz else 1 - f[:, 2]))
                     v = a[i0[:, 0] + dx, i0[:, 1] + dy, i0[:, 2] + dz]
                     out = out + (w[:, None] * v if v.ndim == 2 else w * v)
         return np.asarray(out, dtype=np.float64)

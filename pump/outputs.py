@@ -16,7 +16,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .geometry import BLADE_ZONES, COMPONENTS, REGIONS
+from .geometry import COMPONENTS, REGIONS
 
 COMP_COLOURS = {"shroud": "tab:green", "blade": "tab:orange", "hub": "tab:blue", "volute": "tab:red",
                 "tongue": "tab:purple", "inlet": "tab:gray", "outlet": "tab:brown"}
@@ -544,7 +544,8 @@ def report_content(case, results: dict) -> dict:
          + f"; cumulative tangential force (sum over steps and triangles): casing "
          f"{_fmt(f1['casing_cumulative_tangential_force_N'])} N vs "
          + ", ".join(f"{c} {_fmt(v)} N" for c, v in f1["impeller_cumulative_tangential_force_N"].items())
-         + f"; tangential share of the casing's contact energy {_fmt(100 * f1['volute_tangential_share_of_energy'])} %."),
+         + "; tangential share of the casing's contact energy "
+         f"{_fmt(100 * f1['volute_tangential_share_of_energy'])} %."),
         ("Blade head (leading edge) has the highest normal energy", f2["reproduced"],
          "normal contact energy per area on the impeller: "
          + ", ".join(f"{z} {_fmt(v)} J/m^2" for z, v in f2["normal_energy_per_area_J_m2"].items())
@@ -643,7 +644,8 @@ def write_html(case, results: dict, figures: dict[str, Path], path: Path) -> Pat
     }
     verdict = Verdict(met=c["n_reproduced"] == 3, headline=f"{c['n_reproduced']} of the seed paper's 3 findings "
                                                            f"reproduced",
-                      details=[f"{t}: {'reproduced' if ok else 'not reproduced'}. {txt}" for t, ok, txt in c["findings"]],
+                      details=[f"{t}: {'reproduced' if ok else 'not reproduced'}. {txt}"
+                               for t, ok, txt in c["findings"]],
                       numbers=[("wall time", f"{case.timings.get('run_s', 0):.0f} s"),
                                ("particles injected", str(results["particles"]["injected"])),
                                ("Euler head", f"{results['fluid_checks']['euler_head_grid_m']:.2f} m")])

@@ -463,8 +463,7 @@ def run_config(cfg: dict, progress: bool = True, vtk: bool = True) -> int:
     print(f"pump: {case.design.describe()}")
     print(f"pump: {case.plan.count} particles scheduled ({case.plan.rate:.1f}/s per world, {case.plan.slots} inlet "
           f"slots), {case.sim.model.num_worlds} world(s), dt = {case.sim.dt:.3g} s, "
-          f"{case.timings.get('steps', int(round(cfg['run']['revolutions'] * case.design.revolution_time / case.sim.dt)))}"
-          f" steps on {cfg['device']}")
+          f"{int(round(cfg['run']['revolutions'] * case.design.revolution_time / case.sim.dt))} steps on {cfg['device']}")
     rec = run_case(case, progress=progress, vtk=vtk, out_dir=out)
     results = analyse(case, rec)
     results["timings_s"] = case.timings

@@ -26,7 +26,6 @@ relative to the wall, split into normal v_n and tangential v_t parts):
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -131,7 +130,8 @@ class ImpactRecorder(BodyForceModel):
     (num_worlds * total_triangles,)."""
 
     name = "wall_impacts"
-    parameters = (ParameterSpec("finnie_k", "m^3/J", 5.0e-10, (0.0, 1.0), "Finnie erosion constant k in V = k m v^2 f"),)
+    parameters = (ParameterSpec("finnie_k", "m^3/J", 5.0e-10, (0.0, 1.0),
+                                "Finnie erosion constant k in V = k m v^2 f"),)
     reference = "Finnie (1960) Wear 3:87"
 
     def bind(self, ctx: BodyForceContext) -> None:
@@ -255,10 +255,12 @@ class WearRecorder:
             out[kind] = {c: v / dt / (n_tri[c] if average else 1) for c, v in tot.items()}
         return out
 
-    def archard_volume(self, wear_coefficient: float, hardness: float, world: int | None = None) -> dict[int, np.ndarray]:
+    def archard_volume(self, wear_coefficient: float, hardness: float,
+                       world: int | None = None) -> dict[int, np.ndarray]:
         """Archard volume per triangle V = (K / H) E_t / mu_pw [m^3] (see module doc)."""
         if not (wear_coefficient > 0 and hardness > 0):
-            raise ConfigError(f"Archard needs wear_coefficient > 0 and hardness > 0 Pa, got {wear_coefficient}, {hardness}")
+            raise ConfigError(f"Archard needs wear_coefficient > 0 and hardness > 0 Pa, "
+                              f"got {wear_coefficient}, {hardness}")
         mu = self.sim.model.get_contact_parameter("mu_s_pw")
         m = self.sim.model
         e_t = getattr(self.sim.solver.wall_stats, "energy_t").numpy()[: m.num_worlds * m.total_triangles]

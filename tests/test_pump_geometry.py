@@ -55,7 +55,8 @@ def test_bad_design_input_is_named():
 
 def test_every_triangle_is_tagged(geo):
     comps = set()
-    for mesh, allowed in ((geo.impeller, {"shroud", "blade", "hub"}), (geo.casing, {"volute", "tongue", "inlet", "outlet"})):
+    for mesh, allowed in ((geo.impeller, {"shroud", "blade", "hub"}),
+                          (geo.casing, {"volute", "tongue", "inlet", "outlet"})):
         names = set(mesh.component_names())
         assert names == allowed
         comps |= names
