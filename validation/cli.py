@@ -212,3 +212,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     print(f"report: {paths.get('report', out / 'report.html')}  (wall {timing['wall_s']} s, DEM {timing['dem_s']} s, "
           f"{timing['dem_worlds_run']} worlds run)")
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(diagnose_main())

@@ -162,6 +162,8 @@ def diagnosis_config(case: str, scale: str) -> dict[str, Any]:
         "parameters": {"mu_s_pp": [0.1, 0.9], "mu_s_pw": [0.1, 0.9]},
         "fixed": {"restitution_pp": 0.6, "restitution_pw": 0.6},
         "candidates": "default",
+        # every case's diagnosis shares one DEM cache: the designs do not depend on the data
+        "cache": "dem_cache.jsonl",
     }
     if scale != "paper":
         cfg["model"]["material"] = None
