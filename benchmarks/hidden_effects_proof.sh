@@ -16,15 +16,10 @@ py=${PYTHON:-python3}
 mkdir -p "$out"
 t0=$(date +%s)
 if [ "$phase" = lab ]; then
-  # the base case first: its measurement file names the conditions the designs simulate
-  $py -m validation.hidden_effects --out "$out" --scale "$scale" --cases base --device "$device" > "$out/gen_base.log" 2>&1
-  for c in rolling cohesion shape; do
-    $py -m validation.hidden_effects --out "$out" --scale "$scale" --cases $c --device "$device" > "$out/gen_$c.log" 2>&1 &
-  done
-  for v in base rolling_resistance cohesion shape; do
-    $py -m validation.cli "$out/diagnose_base.yaml" --device "$device" --prefetch $v > "$out/prefetch_$v.log" 2>&1 &
-  done
-  wait
+  # all four cases in one launch per experiment, then every design (base and each candidate) in one
+  # launch per experiment: the candidate effects nest in one superset model (validation.dem_forward)
+  $py -m validation.hidden_effects --out "$out" --scale "$scale" --device "$device" > "$out/gen.log" 2>&1
+  $py -m validation.cli "$out/diagnose_base.yaml" --device "$device" --prefetch > "$out/prefetch.log" 2>&1
 elif [ "$phase" = diagnose ]; then
   for c in base rolling cohesion shape; do
     $py -m validation.cli "$out/diagnose_$c.yaml" --device "$device" > "$out/diagnose_$c.log" 2>&1 &

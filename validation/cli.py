@@ -159,13 +159,26 @@ def _prefetch(obs, space, cands, forward, settings, which: Sequence[str]) -> int
         print(f"warpdem diagnose: --prefetch: unknown version(s) {unknown}; valid: {sorted(names)}", file=sys.stderr)
         return 2
     runner = ForwardRunner(forward)
-    for name in (which or list(names)):
+    chosen = list(which or names)
+    t0 = time.perf_counter()
+    if getattr(forward, "superset", False):
+        # one model holds every version: all designs in one launch per experiment
+        sets = []
+        for name in chosen:
+            v, n, seed = names[name]
+            sets += [forward.padded(v.effect_names, p) for p in v.parameter_sets(latin_hypercube(v.space, n, seed=seed))]
+        runner(tuple(forward.effects), sets, settings.replicates, tuple(obs.keys))
+        print(json.dumps({"prefetched": chosen, "sets": len(sets), "replicates": settings.replicates, "superset": True,
+                          "wall_s": round(time.perf_counter() - t0, 1), "dem_worlds_run": forward.dem_worlds,
+                          "launches": forward.log}), flush=True)
+        return 0
+    for name in chosen:
         v, n, seed = names[name]
-        t0 = time.perf_counter()
+        t1 = time.perf_counter()
         X = latin_hypercube(v.space, n, seed=seed)
         runner(v.effect_names, v.parameter_sets(X), settings.replicates, tuple(obs.keys))
         print(json.dumps({"prefetched": name, "sets": n, "replicates": settings.replicates,
-                          "wall_s": round(time.perf_counter() - t0, 1), "dem_worlds_run": forward.dem_worlds}),
+                          "wall_s": round(time.perf_counter() - t1, 1), "dem_worlds_run": forward.dem_worlds}),
               flush=True)
     return 0
 

@@ -64,6 +64,12 @@ class DEMForwardModel(ForwardModel):
             protocol), overridden by the condition's own settings.
         fixed: contact parameters applied to every world (e.g. restitution).
         cache: JSONL file of world results (None: no cache).
+        superset: run every model version as the base plus ALL candidate effects, the ones not
+            switched on held at their "off" value (rolling friction 0, cohesion 0, aspect ratio 1).
+            The physics is the same (an effect at its off value adds exactly nothing), but every
+            version then shares one contact law and material, so the designs of all versions run
+            in one launch per experiment and share one cache. Needs at most one candidate per
+            kind; ``"auto"``: on when that holds.
     """
 
     def __init__(self, base: ModelDescription, base_material: BulkMaterial | None, effects: Sequence[DEMEffect],
@@ -71,7 +77,8 @@ class DEMForwardModel(ForwardModel):
                  experiment_settings: Mapping[str, Mapping[str, Any]] | None = None,
                  fixed: Mapping[str, float] | None = None, device: str | None = None,
                  processes: int | str | None = "auto", cache: str | Path | None = None,
-                 progress: bool = False, proposals: Sequence[ProposedMeasurement] = ()) -> None:
+                 progress: bool = False, proposals: Sequence[ProposedMeasurement] = (),
+                 superset: bool | str = "auto") -> None:
         self.base = base
         self.base_material = base_material
         self.effects = {e.name: e for e in effects}
@@ -91,6 +98,13 @@ class DEMForwardModel(ForwardModel):
         self._proposals = tuple(proposals)
         self.cache_path = Path(cache) if cache is not None else None
         self._cache: dict[str, dict[str, Any]] = {}
+        kinds = [e.kind for e in effects]
+        mergeable = len(set(kinds)) == len(kinds)
+        if superset == "auto":
+            superset = mergeable
+        elif superset and not mergeable:
+            raise ConfigError(f"superset: candidates of the same kind cannot be merged into one model: {kinds}")
+        self.superset = bool(superset)
         self.dem_seconds = 0.0
         self.dem_worlds = 0
         self.log: list[dict[str, Any]] = []
@@ -113,12 +127,24 @@ class DEMForwardModel(ForwardModel):
         return make_experiment(experiment, extra.pop("scale", self.scale), **extra).bulk_material()
 
     def description(self, effects: Sequence[str], experiment: str) -> ModelDescription:
-        """The base plus ``effects`` for one experiment, with that experiment's material."""
+        """The base plus ``effects`` (every candidate in superset mode) for one experiment, with
+        that experiment's material."""
         unknown = [e for e in effects if e not in self.effects]
         if unknown:
             raise ConfigError(f"unknown effect(s) {unknown}; this forward model knows {sorted(self.effects)}")
         base = ModelDescription(self.base.contact_law, self.material_for(experiment), self.base.plugins)
-        return apply_effects(base, [self.effects[e] for e in effects], base.material)
+        on = list(self.effects) if self.superset else list(effects)
+        return apply_effects(base, [self.effects[e] for e in on], base.material)
+
+    def padded(self, effects: Sequence[str], parameter_set: Mapping[str, float]) -> dict[str, float]:
+        """In superset mode, ``parameter_set`` with every effect not switched on at its off value."""
+        out = {k: float(v) for k, v in parameter_set.items()}
+        if self.superset:
+            for name, eff in self.effects.items():
+                if name not in effects:
+                    for p in eff.candidate.parameters:
+                        out.setdefault(p.name, float(p.reference))
+        return out
 
     def proposals(self) -> Sequence[ProposedMeasurement]:
         return self._proposals
@@ -145,6 +171,7 @@ class DEMForwardModel(ForwardModel):
     def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
                  keys: Sequence[str]) -> np.ndarray:
         out = np.full((len(parameter_sets), replicates, len(keys)), np.nan)
+        parameter_sets = [self.padded(effects, ps) for ps in parameter_sets]
         # group keys by (experiment, settings without rpm): one run each, rpm per world
         groups: dict[tuple[str, str], list[int]] = {}
         for k_i, key in enumerate(keys):

@@ -6,7 +6,9 @@
 For every case the engine plays the lab: the true model (sliding friction only, or with hidden
 rolling resistance, cohesion or elongated particles) runs the experiments the measurement file
 lists, each repeat with its own loose fill drawn from a block of fill indices that no diagnosis
-design uses. It writes, per case,
+design uses. All cases run in one launch per experiment: the lab model is the union of the
+effects (LIGGGHTS epsd2 rolling, SJKR cohesion, elongated clumps), each case's absent effects at
+their off value, which adds exactly nothing. It writes, per case,
 
 - ``lab_<case>.yaml``: the measurement file (``warpdem-measurements/2``): A static angle and bulk
   density, B dynamic angle at 15, 30 and 45 rpm, C pile angle (or "no pile") and pile height,
@@ -14,8 +16,8 @@ design uses. It writes, per case,
 - ``diagnose_<case>.yaml``: a diagnosis config of the base model (sliding frictions only);
 - ``truth_<case>.json``: the hidden model and parameters, kept apart for the scoring afterwards.
 
-Scales: "paper" (spheres 16-20 mm by number, 16 kg box, paper drum, 10 kg hollow cylinder lifted
-at 0.05 m/s; GPU), "quick" (the quick presets; a few minutes on 2 CPU cores) and "tiny" (a 9 kg
+Scales: "paper" (spheres 16-20 mm by number, 16 kg box, paper drum (one revolution discarded, two
+recorded), 10 kg hollow cylinder lifted at 0.1 m/s; GPU), "quick" (the quick presets; a few minutes on 2 CPU cores) and "tiny" (a 9 kg
 baffle test only, for the smoke test of the whole chain).
 """
 from __future__ import annotations
@@ -59,8 +61,8 @@ def conditions(scale: str) -> dict[str, dict[str, dict[str, Any]]]:
     """Experiment -> condition name -> protocol settings the lab used (and the model must use)."""
     if scale == "paper":
         return {"baffle": {"16kg": {"fill_mass": 16.0}},
-                "drum": {f"{r}rpm": {"rpm": float(r), "discard": 1, "record": 3} for r in (15, 30, 45)},
-                "cylinder": {"10kg": {"fill_mass": 10.0, "lift_speed": 0.05}}}
+                "drum": {f"{r}rpm": {"rpm": float(r), "discard": 1, "record": 2} for r in (15, 30, 45)},
+                "cylinder": {"10kg": {"fill_mass": 10.0, "lift_speed": 0.1}}}
     if scale == "tiny":  # a smoke test of the whole chain in seconds (quick presets, small fills)
         return {"baffle": {"9kg": {"fill_mass": 9.0, "lift_to": 0.25, "max_time_after_lift": 1.5, "min_bins": 2}}}
     return {"baffle": {"quick": {}}, "drum": {f"{r}rpm": {"rpm": float(r)} for r in (15, 30, 45)},
@@ -77,17 +79,32 @@ def _experiment_scale(exp: str, scale: str) -> str:
     return "quick" if scale == "tiny" else scale
 
 
-def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
-                  processes: Any = "auto", progress: bool = False) -> dict[str, Any]:
-    """Run the lab for one case and write its measurement file, diagnosis config and truth."""
+#: the lab holds every case in one model: the union of the effects, each case's absent effects at
+#: their off value (rolling friction 0, cohesion 0, aspect ratio 1), which adds exactly nothing
+LAB_LAW = {"rolling": "epsd2", "cohesion": "sjkr"}
+OFF = {"mu_r_pp": 0.0, "mu_r_pw": 0.0, "cohesion_energy_density_pp": 0.0, "cohesion_energy_density_pw": 0.0,
+       "aspect_ratio": 1.0}
+
+
+def case_parameters(case: str) -> dict[str, float]:
+    """Every parameter of the lab's union model for one case."""
     spec = CASES[case]
-    law = wd.ContactLaw(**spec["law"])
+    shape = {k: v for k, v in (spec["shape"] or {}).items() if k != "family"}
+    return {**TRUE_FRICTION, **OFF, **spec["parameters"], **shape}
+
+
+def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
+                   processes: Any = "auto", progress: bool = False) -> dict[str, Any]:
+    """Run the lab for several cases at once (one launch per experiment and condition group: every
+    case, drum speed and repeat is a world) and write each case's measurement file, diagnosis
+    config and truth."""
+    law = wd.ContactLaw(**LAB_LAW)
     mat_cfg = lab_material(scale)
-    params = {**TRUE_FRICTION, **spec["parameters"]}
     t0 = time.perf_counter()
-    experiments: dict[str, Any] = {}
+    experiments: dict[str, dict[str, Any]] = {c: {} for c in cases}
+    notes: dict[str, list[str]] = {}
     launches = []
-    for exp_name, conds in conditions(scale).items():
+    for e_i, (exp_name, conds) in enumerate(conditions(scale).items()):
         # conditions differing only in drum speed run in one launch (rpm is per world)
         groups: dict[str, list[tuple[str, dict]]] = {}
         for cname, settings in conds.items():
@@ -97,61 +114,82 @@ def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, 
             common = json.loads(key)
             base_mat = (BulkMaterial.from_config(mat_cfg) if mat_cfg is not None
                         else make_experiment(exp_name, _experiment_scale(exp_name, scale)).bulk_material())
-            material = base_mat
-            if spec["shape"] is not None:
-                shape = dict(spec["shape"])
-                fam = shape.pop("family")
-                d = base_mat.diameter
-                material = BulkMaterial.shaped(fam, d[0], d[1], particle=base_mat.particle,
-                                               solids_fraction=base_mat.solids_fraction, **shape)
-            first = LAB_FILLS + 100_000 * (list(CASES).index(case)) + 1000 * gi + 10_000 * list(conditions(scale)).index(exp_name)
+            d = base_mat.diameter
+            material = BulkMaterial.shaped("elongated", d[0], d[1], particle=base_mat.particle,
+                                           solids_fraction=base_mat.solids_fraction, aspect_ratio=1.0)
+            first = LAB_FILLS + 10_000 * e_i + 1000 * gi
             exp = make_experiment(exp_name, _experiment_scale(exp_name, scale), contact_law=law, material=material,
                                   fill_per_world=True, first_fill_index=first, **common)
-            sets = []
-            for cname, settings in members:
-                for _ in range(repeats):
-                    s = dict(params)
-                    if "rpm" in settings:
-                        s["rpm"] = settings["rpm"]
-                    sets.append(s)
+            sets, where = [], []
+            for case in cases:
+                for cname, settings in members:
+                    for _ in range(repeats):
+                        s = case_parameters(case)
+                        if "rpm" in settings:
+                            s["rpm"] = settings["rpm"]
+                        sets.append(s)
+                        where.append((case, cname))
             t1 = time.perf_counter()
             results = exp.run(sets, device=device, progress=progress, processes=processes)
             launches.append({"experiment": exp_name, "worlds": len(sets), "wall_s": round(time.perf_counter() - t1, 1),
                              "spheres": results[0].timing.get("spheres") if results else None})
-            for m_i, (cname, settings) in enumerate(members):
-                rs = results[m_i * repeats:(m_i + 1) * repeats]
-                failed = [r.error for r in rs if not r.ok]
-                if failed:
-                    raise RuntimeError(f"lab case {case}: {exp_name}/{cname} failed: {failed}")
-                obs: dict[str, Any] = {}
-                for q, unit in type(exp).OBSERVABLES.items():
-                    if q == "pile_formed":
+            for case in cases:
+                for cname, settings in members:
+                    rs = [r for r, w in zip(results, where) if w == (case, cname)]
+                    failed = [r.error for r in rs if not r.ok]
+                    if failed:  # a lab that could not read a repeat reports the others, and says so
+                        notes.setdefault(case, []).append(f"{exp_name}/{cname}: {len(failed)} of {len(rs)} "
+                                                          f"repeat(s) not measurable: {failed[0]}")
+                    rs = [r for r in rs if r.ok]
+                    if len(rs) < 2:
                         continue
-                    vals = [r.observables.get(q) for r in rs]
-                    if q == "pile_angle":
-                        formed = [r.observables.get("pile_formed", 1.0) for r in rs]
-                        if all(f == 0.0 for f in formed):
-                            obs[q] = {"unit": unit, "no_pile": len(rs)}
-                            continue
-                    if any(v is None for v in vals):
-                        continue
-                    obs[q] = {"unit": unit, "repeats": [round(float(v), 6) for v in vals]}
-                experiments.setdefault(exp_name, {"conditions": {}})["conditions"][cname] = {
-                    "settings": dict(settings), "observables": obs}
-    doc = {"format": "warpdem-measurements/2",
-           "title": f"synthetic lab data, case '{case}' ({scale} scale)",
-           "source": "validation/hidden_effects.py: the engine as the lab; the hidden model is in truth_*.json",
-           "experiments": experiments}
-    if mat_cfg is not None:
-        doc["material"] = mat_cfg
+                    experiments[case].setdefault(exp_name, {"conditions": {}})["conditions"][cname] = {
+                        "settings": dict(settings), "observables": _observables(type(exp).OBSERVABLES, rs)}
+    wall = round(time.perf_counter() - t0, 1)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"lab_{case}.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-    truth = {"case": case, "words": spec["words"], "contact_law": contact_law_to_dict(law), "parameters": params,
-             "shape": spec["shape"], "scale": scale, "repeats": repeats, "wall_s": round(time.perf_counter() - t0, 1),
-             "launches": launches, "device": str(device or "default")}
-    (out / f"truth_{case}.json").write_text(json.dumps(truth, indent=1, default=str))
-    (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(diagnosis_config(case, scale), sort_keys=False))
-    return truth
+    for case in cases:
+        doc = {"format": "warpdem-measurements/2",
+               "title": f"synthetic lab data, case '{case}' ({scale} scale)",
+               "source": "validation/hidden_effects.py: the engine as the lab; the hidden model is in truth_*.json",
+               "experiments": experiments[case]}
+        if mat_cfg is not None:
+            doc["material"] = mat_cfg
+        if notes.get(case):
+            doc["notes"] = "; ".join(notes[case])
+        (out / f"lab_{case}.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+        truth = {"case": case, "words": CASES[case]["words"], "hidden": CASES[case], "parameters": case_parameters(case),
+                 "lab_model": {"contact_law": contact_law_to_dict(law),
+                               "material": "elongated family over the size range, aspect_ratio per case "
+                                           "(1 = spheres in 5 equal-number size classes)"},
+                 "scale": scale, "repeats": repeats, "notes": notes.get(case, []), "wall_s_all_cases": wall, "launches": launches,
+                 "device": str(device or "default")}
+        (out / f"truth_{case}.json").write_text(json.dumps(truth, indent=1, default=str))
+        (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(diagnosis_config(case, scale), sort_keys=False))
+    return {"cases": cases, "wall_s": wall, "launches": launches}
+
+
+def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
+                  processes: Any = "auto", progress: bool = False) -> dict[str, Any]:
+    """:func:`generate_cases` for one case."""
+    return generate_cases([case], out, scale, repeats, device, processes, progress)
+
+
+def _observables(reported: dict[str, str], rs: list) -> dict[str, Any]:
+    """The v2 observables of one condition from its repeats ("no pile" when no repeat formed one)."""
+    obs: dict[str, Any] = {}
+    for q, unit in reported.items():
+        if q == "pile_formed":
+            continue
+        vals = [r.observables.get(q) for r in rs]
+        if q == "pile_angle":
+            formed = [r.observables.get("pile_formed", 1.0) for r in rs]
+            if all(f == 0.0 for f in formed):
+                obs[q] = {"unit": unit, "no_pile": len(rs)}
+                continue
+        if any(v is None for v in vals):
+            continue
+        obs[q] = {"unit": unit, "repeats": [round(float(v), 6) for v in vals]}
+    return obs
 
 
 def diagnosis_config(case: str, scale: str) -> dict[str, Any]:
@@ -165,6 +203,9 @@ def diagnosis_config(case: str, scale: str) -> dict[str, Any]:
         # every case's diagnosis shares one DEM cache: the designs do not depend on the data
         "cache": "dem_cache.jsonl",
     }
+    if scale == "paper":
+        cfg["diagnosis"] = {"design_points_per_parameter": 6, "min_design_points": 12, "replicates": 2,
+                            "confirm_replicates": 2, "refine_points": 6}
     if scale != "paper":
         cfg["model"]["material"] = None
     if scale == "tiny":
@@ -187,10 +228,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.repeats < 2:
         ap.error("--repeats must be >= 2 (a standard error needs repeats)")
-    for case in args.cases:
-        truth = generate_case(case, Path(args.out), args.scale, args.repeats, args.device, args.processes,
-                              args.progress)
-        print(json.dumps({"case": case, "wall_s": truth["wall_s"], "launches": truth["launches"]}), flush=True)
+    res = generate_cases(list(args.cases), Path(args.out), args.scale, args.repeats, args.device, args.processes,
+                         args.progress)
+    print(json.dumps(res), flush=True)
     return 0
 
 
