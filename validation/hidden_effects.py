@@ -50,8 +50,8 @@ CASES: dict[str, dict[str, Any]] = {
     "rolling": {"law": {"rolling": "epsd2"}, "parameters": {"mu_r_pp": 0.15, "mu_r_pw": 0.15}, "shape": None,
                 "words": "hidden rolling resistance (LIGGGHTS epsd2, mu_r = 0.15)"},
     "cohesion": {"law": {"rolling": "none", "cohesion": "sjkr"},
-                 "parameters": {"cohesion_energy_density_pp": 8.0e4, "cohesion_energy_density_pw": 8.0e4},
-                 "shape": None, "words": "hidden cohesion (SJKR, k = 8e4 J/m^3)"},
+                 "parameters": {"cohesion_energy_density_pp": 3.0e5, "cohesion_energy_density_pw": 3.0e5},
+                 "shape": None, "words": "hidden cohesion (SJKR, k = 3e5 J/m^3)"},
     "shape": {"law": {"rolling": "none"}, "parameters": {}, "shape": {"family": "elongated", "aspect_ratio": 1.8},
               "words": "hidden particle shape (rods of aspect ratio 1.8)"},
 }
@@ -94,10 +94,12 @@ def case_parameters(case: str) -> dict[str, float]:
 
 
 def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
-                   processes: Any = "auto", progress: bool = False) -> dict[str, Any]:
+                   processes: Any = "auto", progress: bool = False, dt: float | None = None) -> dict[str, Any]:
     """Run the lab for several cases at once (one launch per experiment and condition group: every
     case, drum speed and repeat is a world) and write each case's measurement file, diagnosis
-    config and truth."""
+    config and truth. ``dt`` [s]: a fixed time step for every launch (the diagnosis config then
+    uses the same), else each batch's recommended step."""
+    numerics = {} if dt is None else {"dt": float(dt), "force_dt": True}
     law = wd.ContactLaw(**LAB_LAW)
     mat_cfg = lab_material(scale)
     t0 = time.perf_counter()
@@ -119,7 +121,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                                            solids_fraction=base_mat.solids_fraction, aspect_ratio=1.0)
             first = LAB_FILLS + 10_000 * e_i + 1000 * gi
             exp = make_experiment(exp_name, _experiment_scale(exp_name, scale), contact_law=law, material=material,
-                                  fill_per_world=True, first_fill_index=first, **common)
+                                  fill_per_world=True, first_fill_index=first, **common, **numerics)
             sets, where = [], []
             for case in cases:
                 for cname, settings in members:
@@ -132,7 +134,8 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
             t1 = time.perf_counter()
             results = exp.run(sets, device=device, progress=progress, processes=processes)
             launches.append({"experiment": exp_name, "worlds": len(sets), "wall_s": round(time.perf_counter() - t1, 1),
-                             "spheres": results[0].timing.get("spheres") if results else None})
+                             "spheres": results[0].timing.get("spheres") if results else None,
+                             "dt_s": results[0].timing.get("dt_s") if results else None})
             for case in cases:
                 for cname, settings in members:
                     rs = [r for r, w in zip(results, where) if w == (case, cname)]
@@ -164,7 +167,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                  "scale": scale, "repeats": repeats, "notes": notes.get(case, []), "wall_s_all_cases": wall, "launches": launches,
                  "device": str(device or "default")}
         (out / f"truth_{case}.json").write_text(json.dumps(truth, indent=1, default=str))
-        (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(diagnosis_config(case, scale), sort_keys=False))
+        (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(diagnosis_config(case, scale, dt), sort_keys=False))
     return {"cases": cases, "wall_s": wall, "launches": launches}
 
 
@@ -192,7 +195,7 @@ def _observables(reported: dict[str, str], rs: list) -> dict[str, Any]:
     return obs
 
 
-def diagnosis_config(case: str, scale: str) -> dict[str, Any]:
+def diagnosis_config(case: str, scale: str, dt: float | None = None) -> dict[str, Any]:
     """A base-model diagnosis of one case: sliding frictions calibrated, every effect a candidate."""
     cfg: dict[str, Any] = {
         "name": f"hidden-{case}", "measurements": f"lab_{case}.yaml", "output": f"diagnosis_{case}",
@@ -203,7 +206,10 @@ def diagnosis_config(case: str, scale: str) -> dict[str, Any]:
         # every case's diagnosis shares one DEM cache: the designs do not depend on the data
         "cache": "dem_cache.jsonl",
     }
+    if dt is not None:  # the lab's fixed step: the model must integrate as the lab did
+        cfg["experiments"] = {e: {"dt": float(dt), "force_dt": True} for e in conditions(scale)}
     if scale == "paper":
+        cfg["effect_ranges"] = {"cohesion_energy_density_pp": [0.0, 5.0e5], "cohesion_energy_density_pw": [0.0, 5.0e5]}
         cfg["diagnosis"] = {"design_points_per_parameter": 6, "min_design_points": 12, "replicates": 2,
                             "confirm_replicates": 2, "refine_points": 6}
     if scale != "paper":
@@ -225,11 +231,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default=None)
     ap.add_argument("--processes", default="auto")
     ap.add_argument("--progress", action="store_true")
+    ap.add_argument("--dt", type=float, default=None, help="fixed time step [s] for the lab and the diagnosis")
     args = ap.parse_args(argv)
     if args.repeats < 2:
         ap.error("--repeats must be >= 2 (a standard error needs repeats)")
     res = generate_cases(list(args.cases), Path(args.out), args.scale, args.repeats, args.device, args.processes,
-                         args.progress)
+                         args.progress, args.dt)
     print(json.dumps(res), flush=True)
     return 0
 

@@ -54,8 +54,9 @@ COHESION_ENERGY_DENSITY = ParameterSpec(
     "cohesion_energy_density", "J/m^3", 0.0, (0.0, 1.0e7),
     "cohesion energy density k of SJKR: attractive normal force k A over the contact area A "
     "(LIGGGHTS cohesionEnergyDensity)",
-    # 1e5 J/m^3 pulls a 20 mm gravel sphere (E = 1e7 Pa) off a ceiling against its weight
-    design_range=(0.0, 1.5e5), off_value=0.0,
+    # about 1e5 J/m^3 holds a 20 mm gravel sphere (E = 1e7 Pa) under a ceiling against its weight;
+    # the default design explores up to a few times that (bond numbers up to ~5)
+    design_range=(0.0, 5.0e5), off_value=0.0,
 )
 
 
