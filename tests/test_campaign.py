@@ -210,3 +210,22 @@ def test_quick_config_recovers_dem_targets(tmp_path):
     ranges = res["optimisation"]["acceptable_ranges"]
     assert ranges["mu_s_pp"][0] <= 0.45 <= ranges["mu_s_pp"][1]
     assert ranges["mu_s_pw"][0] <= 0.35 <= ranges["mu_s_pw"][1]
+
+
+@pytest.mark.slow
+def test_quick_effects_campaign_runs_end_to_end(tmp_path):
+    """Issue 10: a campaign calibrating a sliding friction, a SJKR cohesion energy density and the
+    rods' aspect ratio runs end to end on the CPU (quick_effects.yaml, about 30 min on 2 cores), and
+    its records name the full contact law and material. (Two responses for three parameters: the
+    acceptable set is a surface; the check is that the pipeline carries the effects, not recovery.)"""
+    cfg = cp.load_config(Path(__file__).parents[1] / "calibration" / "configs" / "quick_effects.yaml")
+    cfg.device = "cpu"
+    res = cp.Campaign(cfg, tmp_path, verbose=False).run(progress=False)
+    assert res["model"]["contact_law"]["rolling"] == "epsd2" and res["model"]["contact_law"]["cohesion"] == "sjkr"
+    assert res["model"]["material"]["shape"] == "elongated"
+    assert set(res["parameters"]) == {"mu_s_pp", "cohesion_energy_density_pp", "aspect_ratio"}
+    assert not res["design"]["failed"], res["design"]["failed"]
+    for c in res["confirmation"]["responses"].values():
+        assert c["dem_deg"] is not None
+    summary = (tmp_path / "summary.md").read_text()
+    assert "rolling:epsd2+cohesion:sjkr" in summary and "elongated" in summary

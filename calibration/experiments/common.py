@@ -265,7 +265,8 @@ class Experiment:
     ke_per_particle: settled criterion [J] (spec A: 1e-6); fill_settle_max_time [s] (spec A: 1.5;
         extended by the fall time when the loose column stands above the walls).
     settle_check_interval, removal_interval: [s] between KE checks / removals of escaped particles.
-    max_contacts: contact slots per sphere; max_neighbours: neighbour-list slots per sphere (None:
+    max_contacts: contact slots per sphere (at least 16 + 8 (n - 1) for clumps of n members);
+        max_neighbours: neighbour-list slots per sphere (None:
         the solver's default). A run whose slots overflow is run again from the same fill with
         more slots (``overflow_retries`` times at most; recorded in ``timing["retries"]``).
     seed: fill RNG seed. fill_per_world: a different loose fill in every world (default: the
@@ -559,7 +560,7 @@ class Experiment:
         else:
             fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
         _, t_motion = self.fill_settle_times(fills)
-        max_contacts, max_neighbours = int(self.max_contacts), self.max_neighbours
+        max_contacts, max_neighbours = max(int(self.max_contacts), _contact_slots(materials)), self.max_neighbours
         retries: list[dict[str, Any]] = []
         while True:
             model, sim, dt, limits = self._build_model(law, material, fills, sets, defaults, t_motion, device,
@@ -634,6 +635,14 @@ class Experiment:
             results.append(r)
         ctx.log("done: " + ", ".join(f"w{r.world}={r.angle_deg:.2f}" if r.ok else f"w{r.world}=failed" for r in results))
         return results
+
+
+def _contact_slots(materials: Sequence[BulkMaterial]) -> int:
+    """Contact slots per sphere a batch's materials need: a member sphere of a clump can touch
+    every member of each neighbouring clump, so clumps of n members get 16 + 8 (n - 1) (rods
+    close to a sphere, whose members nearly coincide, overflowed 36 slots)."""
+    n = max((len(t.radii) for m in materials for t, _ in (m.clumps or ())), default=1)
+    return 16 + 8 * (n - 1)
 
 
 def _material_key(m: BulkMaterial) -> Any:
