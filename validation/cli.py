@@ -134,8 +134,9 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     proposals = _proposals(cfg, list(observations))
     specs += [ObservableSpec(p.key, p.experiment, p.quantity, condition_settings(p.experiment, dict(p.condition)))
               for p in proposals]
-    # paths in the config are relative to the config's folder; --output to the working directory
-    out = output or _relative(Path(cfg.output or f"results/diagnosis_{cfg.name}"), base_dir)
+    # measurements and cache are relative to the config's folder; the output folder (as in
+    # `warpdem calibrate`) and --output to the working directory
+    out = output or Path(cfg.output or f"results/diagnosis_{cfg.name}")
     cache = _relative(Path(cfg.cache), base_dir) if cfg.cache else out / "dem_runs.jsonl"
     forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
                               fixed=fixed, device=device or cfg.device,

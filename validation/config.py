@@ -7,8 +7,8 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
 .. code-block:: yaml
 
     name: hidden-rolling
-    measurements: lab.yaml            # measurement file (warpdem-measurements/2; v1 loads too)
-    output: results/diagnosis         # default: results/diagnosis_<name>
+    measurements: lab.yaml            # measurement file (warpdem-measurements/2; v1 loads too), relative to this file
+    output: results/diagnosis         # default: results/diagnosis_<name> (relative to the working directory)
     device: null                      # null: cuda if present, else cpu
     processes: auto                   # CPU: worlds split over one process per core
     scale: paper                      # experiment preset (paper | quick)

@@ -167,7 +167,9 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                  "scale": scale, "repeats": repeats, "notes": notes.get(case, []), "wall_s_all_cases": wall, "launches": launches,
                  "device": str(device or "default")}
         (out / f"truth_{case}.json").write_text(json.dumps(truth, indent=1, default=str))
-        (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(diagnosis_config(case, scale, dt), sort_keys=False))
+        cfg = diagnosis_config(case, scale, dt)
+        cfg["output"] = str(out / f"diagnosis_{case}")
+        (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     return {"cases": cases, "wall_s": wall, "launches": launches}
 
 
