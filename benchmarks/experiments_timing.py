@@ -1,4 +1,4 @@
-"""Timing of the standard experiments (spec: /work/shared/spec/experiments.md A, B, C).
+"""Timing of the standard experiments (docs/experiments.md, A, B, C).
 
 Runs each experiment once per requested world count and prints one JSON line per run:
 experiment, scale, device, worlds, spheres, steps, simulated and wall seconds, and the

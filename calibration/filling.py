@@ -1,5 +1,5 @@
 """Loose fills, settling and levelling for the standard experiments
-(spec: /work/shared/spec/experiments.md, A "Fill", B "Fill", C "Fill").
+(docs/experiments.md, A "Fill", B "Fill", C "Fill").
 
 Fill: random sequential addition (RSA) in horizontal slabs rising from the region's
 floor. Each particle (spheres, or clumps with a random orientation) tries batches of random

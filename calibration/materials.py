@@ -1,4 +1,4 @@
-"""Bulk materials of the standard experiments (spec: /work/shared/spec/experiments.md,
+"""Bulk materials of the standard experiments (docs/experiments.md,
 "Default material"): plain spheres with a diameter distribution, a number-fraction mix
 of multi-sphere clump templates (seed paper Tables 2-3), or a shape family
 (:mod:`warpdem.shape_families`, e.g. ``elongated`` with a continuous ``aspect_ratio``) over

@@ -1,4 +1,4 @@
-"""Standard experiments (spec: /work/shared/spec/experiments.md): materials, fills, levelling,
+"""Standard experiments (docs/experiments.md): materials, fills, levelling,
 configs and quick-scale runs of A (baffle), B (drum) and C (hollow cylinder).
 
 The quick runs take 20-40 s each on 2 CPU cores."""

@@ -1,4 +1,4 @@
-"""settled-bed benchmark (../shared/spec/benchmarks.md): the engine's reference case.
+"""settled-bed benchmark (docs/benchmarks.md): the engine's reference case.
 
 N monodisperse spheres d = 18 mm, rho = 2661, E = 1e7 Pa, nu = 0.3, e = 0.6, mu_s = 0.5,
 mu_r = 0.1 (EPSD), dt = 5e-5 s, box 0.6 x 0.6 m (widened in x, y at the same depth for

@@ -1,4 +1,4 @@
-"""Standard virtual experiments (spec: /work/shared/spec/experiments.md).
+"""Standard virtual experiments (definitions: docs/experiments.md).
 
 - :class:`BaffleBox` (A): static angle of repose alpha_AoR_S and fill bulk density.
 - :class:`RotatingDrum` (B): dynamic angle of repose beta_AoR_D (mean and spread over snapshots).

@@ -1,5 +1,5 @@
 """A. Baffle lifting box: static angle of repose alpha_AoR_S
-(spec: /work/shared/spec/experiments.md, section A; seed paper Sec. 2.1.2, Table 1)."""
+(docs/experiments.md, section A; seed paper Sec. 2.1.2, Table 1)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

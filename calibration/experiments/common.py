@@ -1,4 +1,4 @@
-"""Shared machinery of the standard experiments (spec: /work/shared/spec/experiments.md).
+"""Shared machinery of the standard experiments (definitions: docs/experiments.md).
 
 One :meth:`Experiment.run` builds ONE :class:`warpdem.Model` with one world per parameter
 set (same loose fill and shared walls in every world, per-world contact parameters),

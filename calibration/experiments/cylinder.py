@@ -1,5 +1,5 @@
 """C. Hollow cylinder lifting: validation pile angle gamma_s
-(spec: /work/shared/spec/experiments.md, section C; seed paper Table 10)."""
+(docs/experiments.md, section C; seed paper Table 10)."""
 from __future__ import annotations
 
 from dataclasses import dataclass

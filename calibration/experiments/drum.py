@@ -1,5 +1,5 @@
 """B. Rotating drum: dynamic angle of repose beta_AoR_D
-(spec: /work/shared/spec/experiments.md, section B; seed paper Sec. 2.1.2, Table 1)."""
+(docs/experiments.md, section B; seed paper Sec. 2.1.2, Table 1)."""
 from __future__ import annotations
 
 import math

@@ -1,6 +1,6 @@
 """Angles of repose from particle data or pictures (engine independent).
 
-Definitions follow /work/shared/spec/experiments.md (A baffle box, B drum,
+Definitions follow docs/experiments.md (A baffle box, B drum,
 C hollow cylinder, Images) and the seed paper's Section 2.1.2 / Tables 1, 10.
 
 - :mod:`.profiles`: angles from particle centres (N, 3) and radii (m).

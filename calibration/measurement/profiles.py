@@ -1,4 +1,4 @@
-"""Angles of repose from particle data (spec: /work/shared/spec/experiments.md).
+"""Angles of repose from particle data (definitions: docs/experiments.md).
 
 Inputs are plain numpy arrays in SI units: particle centres ``positions`` (N, 3)
 in metres (z up), radii (N,) in metres (or a scalar), masses (N,) in kg. Each
