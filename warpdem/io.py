@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
+from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
@@ -13,32 +15,64 @@ from .materials import Material
 from .model import Model, Wall, WallMotion
 
 
-def write_vtk(directory: str | os.PathLike, sim, frame: int, world: int | None = None) -> list[Path]:
-    """Write spheres (``particles_NNNNNN.vtp``: radius, velocity, body, world) and walls
-    (``wall_<name>_NNNNNN.vtp`` with per-triangle wear accumulators) for one frame.
+def _safe_name(name: str) -> str:
+    """A wall name as a file-name part: characters other than letters, digits, ``-``, ``_`` become ``_``."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", name).strip("_") or "wall"
 
-    Spheres of inactive (removed) bodies are skipped. ``world`` restricts output to one world.
+
+def particle_cloud(sim, world: int | None = None):
+    """The active spheres of ``sim`` (of one ``world``, or all) as a ``pyvista.PolyData`` point cloud.
+
+    Point fields (SI units): ``radius``, ``diameter`` [m]; ``velocity`` [m/s] of the sphere centre
+    (body velocity + angular velocity x arm, so clump members differ); ``angular_velocity``
+    [rad/s] of the body; ``contact_force`` [N]: the sum of the contact forces (particles and
+    walls) on the sphere in the last step (gravity not included); ``contacts``: contacts of the
+    sphere; ``id``: body index (members of one clump share it); ``sphere``: sphere index;
+    ``body`` (same as ``id``, kept for older files); ``world``.
     """
     import pyvista as pv
 
-    out = Path(directory)
-    out.mkdir(parents=True, exist_ok=True)
     m: Model = sim.model
+    if world is not None and not 0 <= int(world) < m.num_worlds:
+        raise ConfigError(f"VTK output: world {world} does not exist (the model has {m.num_worlds} world(s))")
     x = sim.sphere_positions()
     body = m.host["sphere_body"]
-    active = sim.state.body_active.numpy()[body].astype(bool)
+    state = sim.state
+    active = state.body_active.numpy()[body].astype(bool)
     sel = active if world is None else active & (m.host["sphere_world"] == world)
-    v = sim.state.body_v.numpy()[body]
-    cloud = pv.PolyData(x[sel])
-    cloud["radius"] = m.host["sphere_radius"][sel]
-    cloud["diameter"] = 2.0 * m.host["sphere_radius"][sel]
-    cloud["velocity"] = v[sel]
+    v_body = state.body_v.numpy()[body].astype(np.float64)
+    w_body = state.body_w.numpy()[body].astype(np.float64)
+    arm = x - state.body_q.numpy()[body].astype(np.float64)
+    velocity = v_body + np.cross(w_body, arm)
+    cloud = pv.PolyData(np.ascontiguousarray(x[sel]))
+    radius = m.host["sphere_radius"][sel]
+    cloud["radius"] = radius
+    cloud["diameter"] = 2.0 * radius
+    cloud["velocity"] = velocity[sel]
+    cloud["angular_velocity"] = w_body[sel]
+    cloud["contact_force"] = sim.solver.sphere_f.numpy()[sel].astype(np.float64)
+    cloud["contacts"] = state.contact_count.numpy()[sel]
+    cloud["id"] = body[sel]
+    cloud["sphere"] = np.flatnonzero(sel)
     cloud["body"] = body[sel]
     cloud["world"] = m.host["sphere_world"][sel]
-    paths = [out / f"particles_{frame:06d}.vtp"]
-    cloud.save(paths[0])
+    return cloud
+
+
+def wall_surfaces(sim, world: int | None = None) -> list[tuple[str, object]]:
+    """``(name, pyvista.PolyData)`` of every wall in its current position (walls of other worlds
+    left out when ``world`` is given). Cell fields: the wear accumulators of
+    :class:`warpdem.solver.WallStats` per triangle (``energy_n``, ``energy_t`` [J],
+    ``impulse_n``, ``impulse_t`` [N s]) of ``world`` (or summed over worlds), and ``component``
+    where the wall has labelled triangles."""
+    import pyvista as pv
+
+    m: Model = sim.model
+    out = []
     for wi, w in enumerate(m.walls):
-        pts = w.mesh.points.numpy()
+        if world is not None and w.world not in (-1, world):
+            continue
+        pts = w.mesh.points.numpy().astype(np.float64)
         faces = np.hstack([np.full((w.num_triangles, 1), 3), w.faces]).ravel()
         mesh = pv.PolyData(pts, faces)
         for field in sim.solver.wall_stats.FIELDS:
@@ -46,10 +80,78 @@ def write_vtk(directory: str | os.PathLike, sim, frame: int, world: int | None =
             mesh.cell_data[field] = a[world] if world is not None else a.sum(axis=0)
         if w.triangle_labels is not None:
             mesh.cell_data["component"] = w.triangle_labels
-        p = out / f"wall_{w.name}_{frame:06d}.vtp"
+        out.append((w.name, mesh))
+    return out
+
+
+def write_vtk(directory: str | os.PathLike, sim, frame: int, world: int | None = None) -> list[Path]:
+    """Write spheres (``particles_NNNNNN.vtp``, fields of :func:`particle_cloud`) and walls
+    (``wall_<name>_NNNNNN.vtp`` with per-triangle wear accumulators) for one frame.
+
+    Spheres of inactive (removed) bodies are skipped. ``world`` restricts output to one world.
+    For a time series that ParaView opens as one object use :class:`VtkSeries`.
+    """
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / f"particles_{frame:06d}.vtp"]
+    particle_cloud(sim, world).save(paths[0])
+    for name, mesh in wall_surfaces(sim, world):
+        p = out / f"wall_{name}_{frame:06d}.vtp"
         mesh.save(p)
         paths.append(p)
     return paths
+
+
+def write_pvd(path: str | os.PathLike, entries: list[tuple[float, str]]) -> Path:
+    """Write a ParaView collection file: ``entries`` are (time [s], file path relative to the
+    ``.pvd``'s folder), in time order."""
+    path = Path(path)
+    times = [float(t) for t, _ in entries]
+    if any(not np.isfinite(t) for t in times) or any(b < a for a, b in zip(times, times[1:])):
+        raise ValueError(f"write_pvd: times must be finite and non-decreasing, got {times}")
+    lines = ['<?xml version="1.0"?>',
+             '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
+    lines += [f'    <DataSet timestep="{t:.9g}" group="" part="0" file="{xml_escape(f, {chr(34): "&quot;"})}"/>'
+              for t, f in entries]
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines))
+    return path
+
+
+class VtkSeries:
+    """A time series for ParaView: one ``.vtp`` file per frame and one ``.pvd`` collection per
+    object in ``directory``: ``particles.pvd`` (fields of :func:`particle_cloud`) and
+    ``wall_<name>.pvd`` per wall (fields of :func:`wall_surfaces`). Open a ``.pvd`` in ParaView
+    (or ``pyvista.PVDReader``) and play it; the time axis is the simulation time [s].
+
+    The ``.pvd`` files are rewritten after every frame, so the frames written so far stay
+    readable when a run stops early. ``world``: the world to write (None: all worlds overlaid).
+    """
+
+    def __init__(self, directory: str | os.PathLike, world: int | None = 0) -> None:
+        self.directory = Path(directory)
+        self.world = None if world is None else int(world)
+        self.frames = 0
+        self._entries: dict[str, list[tuple[float, str]]] = {}
+
+    def write(self, sim) -> list[Path]:
+        """Write the current state of ``sim`` as the next frame; returns the ``.pvd`` files."""
+        self.directory.mkdir(parents=True, exist_ok=True)
+        t = float(sim.time)
+        objects = [("particles", particle_cloud(sim, self.world))]
+        objects += [(f"wall_{_safe_name(name)}", mesh) for name, mesh in wall_surfaces(sim, self.world)]
+        pvds = []
+        for stem, data in objects:
+            entries = self._entries.setdefault(stem, [])
+            if entries and t < entries[-1][0]:
+                raise ValueError(f"VtkSeries: time {t} s is before the last frame's {entries[-1][0]} s")
+            fname = f"{stem}_{self.frames:06d}.vtp"
+            data.save(self.directory / fname)
+            entries.append((t, fname))
+            pvds.append(write_pvd(self.directory / f"{stem}.pvd", entries))
+        self.frames += 1
+        return pvds
 
 
 # ----------------------------------------------------------------------------- checkpoints
