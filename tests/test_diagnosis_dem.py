@@ -23,9 +23,12 @@ def test_diagnosis_reads_only_the_measurement_file_and_resumes_from_its_cache(ti
     work.mkdir()
     # the diagnosis gets the measurement file and its config, never the truth
     shutil.copy(tiny_lab / "lab_rolling.yaml", work)
-    shutil.copy(tiny_lab / "diagnose_rolling.yaml", work)
-    assert not list(work.glob("truth*"))
+    cfg_doc = yaml.safe_load((tiny_lab / "diagnose_rolling.yaml").read_text())
+    cfg_doc["output"] = str(work / "diagnosis_rolling")
+    cfg_doc.pop("cache", None)  # default: the output folder's dem_runs.jsonl
     cfg = work / "diagnose_rolling.yaml"
+    cfg.write_text(yaml.safe_dump(cfg_doc))
+    assert not list(work.glob("truth*"))
     assert diagnose_main([str(cfg), "--processes", "2", "--prefetch", "base"]) == 0
     out = work / "diagnosis_rolling"
     cache = out / "dem_runs.jsonl"
