@@ -173,6 +173,43 @@ def test_failed_measurement_is_recorded_not_dropped():
         assert r.to_dict()["status"] == "failed"
 
 
+def test_cli_writes_vtk_series_when_asked(tmp_path, monkeypatch):
+    """``vtk_every`` makes ``warpdem experiment`` write <output>/vtk/*.pvd (default output folder)."""
+    pv = pytest.importorskip("pyvista")
+    monkeypatch.chdir(tmp_path)
+    cfg = {"experiment": "cylinder", "scale": "quick", "device": "cpu", "processes": 2,
+           "settings": {**TINY_CYL, "vtk_every": 0.1, "vtk_world": 1},
+           "parameters": {"mu_s_pp": [0.5, 0.3], "mu_r_pp": [0.1, 0.1]}}
+    (tmp_path / "tiny.json").write_text(json.dumps(cfg))
+    assert experiment_main(["tiny.json", "--no-plots"]) in (0, 1)
+    vtk = tmp_path / "experiment_cylinder_quick" / "vtk"
+    assert sorted(p.name for p in vtk.glob("*.pvd")) == ["particles.pvd", "wall_cylinder.pvd", "wall_plate.pvd"]
+    reader = pv.PVDReader(str(vtk / "particles.pvd"))
+    times = np.array(reader.time_values)
+    doc = json.loads((tmp_path / "experiment_cylinder_quick" / "results.json").read_text())
+    r = doc["results"][1]
+    assert times[0] == 0.0 and np.all(np.diff(times) > 0) and len(times) >= 4
+    assert "vtk_every" not in r["protocol"]["deviations_from_paper"]  # output, not physics
+    reader.set_active_time_value(times[-1])
+    cloud = reader.read()[0]
+    assert cloud.n_points > 0 and np.all(cloud["world"] == 1)
+    assert {"velocity", "angular_velocity", "contact_force", "radius", "id"} <= set(cloud.point_data.keys())
+    # the cylinder rose during the lift: its last frame is above its first
+    walls = pv.PVDReader(str(vtk / "wall_cylinder.pvd"))
+    walls.set_active_time_value(walls.time_values[0])
+    z0 = walls.read()[0].points[:, 2].min()
+    walls.set_active_time_value(walls.time_values[-1])
+    assert walls.read()[0].points[:, 2].min() > z0 + 0.05
+
+
+def test_vtk_settings_are_checked():
+    with pytest.raises(wd.ConfigError, match="vtk_every"):
+        HollowCylinder.from_config("quick", vtk_every=0.0)
+    with pytest.raises(wd.ConfigError, match="vtk_world 3 does not exist"):
+        HollowCylinder.from_config("quick", vtk_every=0.1, vtk_world=3, vtk_folder="unused", **TINY_CYL).run(
+            [{"mu_s_pp": 0.5}], device="cpu")
+
+
 def test_cli_writes_results_and_pictures(tmp_path):
     cfg = {"experiment": "cylinder", "scale": "quick", "device": "cpu", "settings": TINY_CYL,
            "parameters": {"mu_s_pp": [0.5], "mu_r_pp": [0.1]}}

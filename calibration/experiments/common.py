@@ -183,6 +183,16 @@ class RunContext:
         self.diag: list[dict[str, Any]] = [dict() for _ in range(self.num_worlds)]
         self.errors: list[str | None] = [None] * self.num_worlds
         self._t0 = time.perf_counter()
+        self.vtk = None  # VTK time series of one world, when the experiment asks for it (vtk_every)
+        if experiment.vtk_every is not None:
+            from warpdem.io import VtkSeries
+
+            if not 0 <= int(experiment.vtk_world) < self.num_worlds:
+                raise ConfigError(f"{experiment.name}: vtk_world {experiment.vtk_world} does not exist "
+                                  f"(this run has {self.num_worlds} world(s))")
+            self.vtk = VtkSeries(experiment.vtk_directory(), int(experiment.vtk_world))
+            self.vtk_steps = max(1, int(round(float(experiment.vtk_every) / sim.dt)))
+            self.vtk.write(sim)
 
     def fill(self, world: int) -> FillResult:
         return self.fills[world if len(self.fills) > 1 else 0]
@@ -195,9 +205,33 @@ class RunContext:
     def _phase(self, name: str, seconds: float) -> None:
         self.phases[name] = self.phases.get(name, 0.0) + float(seconds)
 
+    def _recording_vtk(self):
+        """Context in which every ``Simulation.run`` writes a VTK frame each ``vtk_every`` seconds
+        of simulated time (a no-op without ``vtk_every``)."""
+        import contextlib
+
+        if self.vtk is None:
+            return contextlib.nullcontext()
+        sim, plain_run = self.sim, self.sim.run
+
+        def run(steps, check_every=1000, callback=None, callback_every=0, progress=False):
+            if callback is not None:
+                return plain_run(steps, check_every, callback, callback_every, progress)
+            return plain_run(steps, check_every, self.vtk.write, self.vtk_steps, progress)
+
+        @contextlib.contextmanager
+        def recording():
+            sim.run = run
+            try:
+                yield
+            finally:
+                del sim.run
+        return recording()
+
     def settle(self, name: str, max_time: float, min_time: float = 0.0, remove_box=None):
         """Spec "settled" criterion (KE per particle < ``ke_per_particle`` or ``max_time``)."""
-        rep = settle(self.sim, self.exp.ke_per_particle, max_time, min_time, self.exp.settle_check_interval,
+        with self._recording_vtk():
+            rep = settle(self.sim, self.exp.ke_per_particle, max_time, min_time, self.exp.settle_check_interval,
                      remove_box)
         self._phase(name, rep.time)
         for w in range(self.num_worlds):
@@ -208,7 +242,8 @@ class RunContext:
         return rep
 
     def advance(self, name: str, duration: float, remove_box=None) -> None:
-        steps, removed = run_for(self.sim, duration, remove_box, self.exp.removal_interval)
+        with self._recording_vtk():
+            steps, removed = run_for(self.sim, duration, remove_box, self.exp.removal_interval)
         self._phase(name, steps * self.sim.dt)
         self.log(f"{name}: {steps * self.sim.dt:.3f} s simulated, {removed} particle(s) removed")
 
@@ -269,6 +304,10 @@ class Experiment:
         max_neighbours: neighbour-list slots per sphere (None:
         the solver's default). A run whose slots overflow is run again from the same fill with
         more slots (``overflow_retries`` times at most; recorded in ``timing["retries"]``).
+    vtk_every: write a VTK time series (``particles.pvd``, ``wall_<name>.pvd``, for ParaView) of
+        world ``vtk_world`` every this many simulated seconds into ``vtk_folder`` (None:
+        ``experiment_<name>_<scale>/vtk``, under the CLI's default output folder); None: no VTK.
+        A run that writes VTK runs in one process.
     seed: fill RNG seed. fill_per_world: a different loose fill in every world (default: the
         same fill everywhere); world w's fill is seeded by (seed, first_fill_index + w).
     """
@@ -299,6 +338,9 @@ class Experiment:
     fill_per_world: bool = False
     first_fill_index: int = 0
     wall_material: wd.Material = wd.PLEXIGLAS
+    vtk_every: float | None = None
+    vtk_world: int = 0
+    vtk_folder: str | None = None
 
     # ------------------------------------------------------------------ config
     @classmethod
@@ -333,6 +375,10 @@ class Experiment:
                 setattr(self, f.name, tuple(v))
         self._check_positive("v_ref", "ke_per_particle", "settle_check_interval", "removal_interval")
         self._check_nonnegative("fill_settle_max_time")
+        if self.vtk_every is not None:
+            self._check_positive("vtk_every")
+        if not (isinstance(self.vtk_world, int) and self.vtk_world >= 0):
+            raise ConfigError(f"{self.name}: vtk_world must be a world index >= 0, got {self.vtk_world!r}")
         if self.dt is not None:
             self._check_positive("dt")
         if self.dt_rayleigh_fraction is not None:
@@ -388,7 +434,7 @@ class Experiment:
         ref = type(self).from_config("paper")
         out = {}
         for f in dataclasses.fields(self):
-            if f.name in ("scale", "material"):
+            if f.name in ("scale", "material", "vtk_every", "vtk_world", "vtk_folder"):
                 continue
             a, b = getattr(self, f.name), getattr(ref, f.name)
             if a != b:
@@ -399,6 +445,10 @@ class Experiment:
         return out
 
     DEFAULT_MATERIAL_LABEL: ClassVar[str] = "gravel clumps (medium fill)"
+
+    def vtk_directory(self) -> str:
+        """Folder of the VTK time series (``vtk_folder``, or ``experiment_<name>_<scale>/vtk``)."""
+        return self.vtk_folder or f"experiment_{self.name}_{self.scale}/vtk"
 
     def default_material(self) -> BulkMaterial:
         """Paper scale: the seed paper's gravel clump mix (medium fill, spec "Default material")."""
@@ -534,7 +584,7 @@ class Experiment:
         processes > 1 need the ``if __name__ == "__main__":`` guard (spawned interpreters)."""
         nproc = cpu_processes(processes, device)
         n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
-        if nproc > 1 and n_sets > 1:
+        if nproc > 1 and n_sets > 1 and self.vtk_every is None:
             return self._run_in_processes(list(parameter_sets), device, min(nproc, n_sets))
         return self._run(parameter_sets, device, progress)
 
