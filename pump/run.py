@@ -16,6 +16,8 @@ Config keys (SI units; every section optional except what a case needs):
     geometry: {resolution: 1.0, meshes: {component: path}, mesh_scale: 1.0}
     fluid: {density, viscosity, grid_spacing, drag: di_felice|schiller_naumann, added_mass,
             pressure_gradient, buoyancy, voidage_cell}
+    coupling: {two_way: false (one-way, default) | true (the particles' drag corrects the fluid
+               velocity per coarse cell, pump.coupling), relaxation: 1.0 (factor on |u0| / cell)}
     particles: {material: (calibration.materials.BulkMaterial config), volume_fraction | rate,
                 inject_from, inject_until}
     contact: {rolling: none|epsd|cdt, <contact parameter>: value, ...}
@@ -44,12 +46,13 @@ from .geometry import BLADE_ZONES, COMPONENTS, REGIONS, PumpGeometry, blade_camb
 
 SECTIONS = {
     "name": None, "device": None, "output": None, "seed": None, "design": None, "geometry": None, "fluid": None,
-    "particles": None, "contact": None, "wall": None, "run": None, "wear": None, "gravity": None, "notes": None,
+    "coupling": None, "particles": None, "contact": None, "wall": None, "run": None, "wear": None, "gravity": None, "notes": None,
 }
 DEFAULTS = {
     "geometry": {"resolution": 1.0, "meshes": {}, "mesh_scale": 1.0},
     "fluid": {"density": 998.2, "viscosity": 1.002e-3, "grid_spacing": 0.003, "drag": "di_felice",
               "added_mass": 0.5, "pressure_gradient": 1.0, "buoyancy": 1.0, "voidage_cell": 0.05},
+    "coupling": {"two_way": False, "relaxation": 1.0},
     "particles": {"material": {"type": "spheres", "diameter": [0.010, 0.025]}, "volume_fraction": 0.01,
                   "rate": None, "inject_from": 0.0, "inject_until": None},
     # seed paper Sec. 4.2 optimum (friction) and Table 6 (restitution 0.6)
@@ -98,6 +101,13 @@ def load_config(path_or_dict: str | Path | dict) -> dict:
     for k in ("revolutions", "dt", "update_every", "record_every", "vtk_every"):
         if not (isinstance(run[k], (int, float)) and run[k] > 0):
             raise ConfigError(f"{where}: run.{k} must be > 0, got {run[k]!r}")
+    cp = cfg["coupling"]
+    if not isinstance(cp["two_way"], bool):
+        raise ConfigError(f"{where}: coupling.two_way must be true or false, got {cp['two_way']!r}")
+    if isinstance(cp["relaxation"], bool) or not isinstance(cp["relaxation"], (int, float)) \
+            or not (math.isfinite(cp["relaxation"]) and 0 <= cp["relaxation"] <= 100):
+        raise ConfigError(f"{where}: coupling.relaxation must be a number in [0, 100] (factor on the flow-through "
+                          f"rate |u0| / voidage_cell; 0: no decay), got {cp['relaxation']!r}")
     if int(run["worlds"]) < 1:
         raise ConfigError(f"{where}: run.worlds must be >= 1, got {run['worlds']}")
     if cfg["device"] not in ("cpu", "cuda") and not str(cfg["device"]).startswith("cuda:"):
@@ -191,7 +201,8 @@ def build_case(cfg: dict) -> PumpCase:
     b.set_contact_parameters(**cc)
     fluid = GridFluidForces(grid, drag=fl["drag"], added_mass=fl["added_mass"],
                             pressure_gradient=fl["pressure_gradient"], buoyancy=fl["buoyancy"],
-                            voidage_cell=fl["voidage_cell"])
+                            voidage_cell=fl["voidage_cell"], two_way=cfg["coupling"]["two_way"],
+                            relaxation=float(cfg["coupling"]["relaxation"]))
     b.add_body_force(fluid)
     impacts = ImpactRecorder(finnie_k=float(cfg["wear"]["finnie_k"]))
     b.add_body_force(impacts)
@@ -461,6 +472,9 @@ def run_config(cfg: dict, progress: bool = True, vtk: bool = True) -> int:
     out.mkdir(parents=True, exist_ok=True)
     case = build_case(cfg)
     print(f"pump: {case.design.describe()}")
+    fd = case.fluid.describe()
+    print(f"pump: fluid coupling {fd['coupling']} ({fd['drag']} drag"
+          + (f", relaxation {fd['two_way_relaxation']:g})" if case.fluid.two_way else ")"))
     print(f"pump: {case.plan.count} particles scheduled ({case.plan.rate:.1f}/s per world, {case.plan.slots} inlet "
           f"slots), {case.sim.model.num_worlds} world(s), dt = {case.sim.dt:.3g} s, "
           f"{int(round(cfg['run']['revolutions'] * case.design.revolution_time / case.sim.dt))} steps on {cfg['device']}")
@@ -468,6 +482,7 @@ def run_config(cfg: dict, progress: bool = True, vtk: bool = True) -> int:
     results = analyse(case, rec)
     results["timings_s"] = case.timings
     results["config"] = cfg
+    results["fluid_coupling"] = case.fluid.describe()["coupling"]
     paths = write_outputs(case, rec, results, out)
     print(f"pump: {case.timings['steps']} steps in {case.timings['run_s']:.1f} s "
           f"({case.timings['steps'] / max(case.timings['run_s'], 1e-9):.0f} steps/s); report: {paths['report']}")
