@@ -23,6 +23,17 @@ from .errors import MeasurementError
 _VIDEO_EXT = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".wmv", ".mpg", ".mpeg")
 
 
+def _positive_scale(text: str) -> float:
+    """``--scale`` value: a finite number of pixels per mm above 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--scale must be a number of pixels per mm, got {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"--scale must be > 0 pixels per mm, got {text}")
+    return value
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="warpdem measure",
@@ -36,11 +47,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--measure-images", action="store_true",
                    help="with --file and no --experiment: also measure image/video conditions")
     g = p.add_argument_group("image settings (override the file's image_settings)")
-    g.add_argument("--scale", type=float, metavar="PX_PER_MM", help="image scale, px/mm")
+    g.add_argument("--scale", type=_positive_scale, metavar="PX_PER_MM", help="image scale, px/mm (> 0)")
     g.add_argument("--window", type=float, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
-                   help="fit window in mm (with --scale) or px, x right, z up from --origin-px")
+                   help="fit window, x right and z up from --origin-px: in mm with a scale (--scale or "
+                        "the file's), else in px; it must lie inside the image")
     g.add_argument("--window-px", type=float, nargs=4, metavar=("C0", "C1", "R0", "R1"),
-                   help="fit window in pixel columns/rows")
+                   help="fit window in pixel columns C0-C1 and rows R0-R1 counted from the top "
+                        "(row 0 = top row); it must lie inside the image")
     g.add_argument("--origin-px", type=float, nargs=2, metavar=("COL", "ROW"),
                    help="pixel of x = z = 0 (default: bottom-left pixel)")
     g.add_argument("--material", choices=("auto", "dark", "bright"))
@@ -93,9 +106,58 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
         kw.pop("window_units", None)
     kw.update(over)
     if kw.get("window_units", "") is None:
-        # --window without --scale: mm if the file gives a scale, else px
-        kw["window_units"] = "mm" if kw.get("scale_px_per_mm") else "px"
+        # --window without --scale: mm if the file gives a scale, else px, still x right and
+        # z up from the origin (the help's frame), not rows from the top
+        kw["window_units"] = "mm" if kw.get("scale_px_per_mm") else "units"
     return kw
+
+
+def _frame_size(path: str, video: bool) -> tuple[int, int] | None:
+    """(height, width) in px of an image or of a video's frames; None if it cannot be read here
+    (the measurement then reports the problem)."""
+    import cv2
+
+    if not os.path.isfile(path):
+        return None
+    if video:
+        cap = cv2.VideoCapture(path)
+        try:
+            hgt, wid = int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)), int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))
+        finally:
+            cap.release()
+        return (hgt, wid) if hgt > 0 and wid > 0 else None
+    img = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+    return None if img is None else tuple(img.shape[:2])
+
+
+def check_window_inside(path: str, kw: dict[str, Any], video: bool = False) -> None:
+    """Raise :class:`MeasurementError` when the fit window of ``kw`` (measure_image settings)
+    reaches beyond the image at ``path``, naming the image size; a window is never clipped."""
+    window = kw.get("window")
+    if window is None:
+        return
+    size = _frame_size(path, video)
+    if size is None:
+        return
+    hgt, wid = size
+    units = kw.get("window_units") or ("mm" if kw.get("scale_px_per_mm") else "px")
+    if units == "px":
+        c0, c1, r0, r1 = window
+    else:
+        scale = float(kw.get("scale_px_per_mm") or 1.0)
+        col0, row0 = kw.get("origin_px") or (0.0, hgt - 1.0)
+        x0, x1, z0, z1 = window
+        c0, c1 = col0 + min(x0, x1) * scale, col0 + max(x0, x1) * scale + 1
+        r0, r1 = row0 - max(z0, z1) * scale, row0 - min(z0, z1) * scale + 1
+    c0, c1, r0, r1 = min(c0, c1), max(c0, c1), min(r0, r1), max(r0, r1)
+    tol = 1e-6
+    if c0 < -tol or r0 < -tol or c1 > wid + tol or r1 > hgt + tol:
+        unit = {"px": "px (columns, rows from the top)", "units": "px (x right, z up from the origin)"}.get(
+            units, "mm (x right, z up from the origin)")
+        raise MeasurementError(
+            f"{os.path.basename(path)}: the fit window {list(window)} in {unit} covers pixel columns "
+            f"{c0:g}-{c1:g} and rows {r0:g}-{r1:g}, beyond the image of {wid} x {hgt} px "
+            f"(columns 0-{wid}, rows 0-{hgt}); give a window inside the image")
 
 
 def _clean(obj: Any) -> Any:
@@ -129,9 +191,13 @@ def _run(a: argparse.Namespace) -> dict:
         ddir = None if a.no_diagnostic else (a.diagnostic_dir or f"measure_{cond.experiment}_{cond.name}")
         if cond.data == "images":
             cond.images = [(p, _merge(kw, over)) for p, kw in cond.images]
+            for p, kw in cond.images:
+                check_window_inside(str(p), kw)
             out["images"] = [p for p, _ in cond.images]
         elif cond.data == "video":
             cond.video_settings = _merge(cond.video_settings, over)
+            if cond.video and cond.video.get("path"):
+                check_window_inside(str(cond.video["path"]), cond.video_settings, video=True)
         elif over:
             raise MeasurementError(f"image settings given but {a.experiment}/{cond.name} holds {cond.data}")
         out.update(cond.stats(diagnostic_dir=ddir if cond.data in ("images", "video") else None).as_dict())
@@ -142,7 +208,9 @@ def _run(a: argparse.Namespace) -> dict:
     if not a.source:
         raise MeasurementError("nothing to measure: give an image/video path or --file")
     kw = _merge({}, over)
-    if a.video or a.source.lower().endswith(_VIDEO_EXT):
+    video = bool(a.video or a.source.lower().endswith(_VIDEO_EXT))
+    check_window_inside(a.source, kw, video)
+    if video:
         ddir = None if a.no_diagnostic else (a.diagnostic_dir or f"{_stem(a.source)}_frames")
         res = video_frames_for_revolutions(a.source, a.fps, a.rpm, a.discard, a.record, t0=a.t0,
                                            diagnostic_dir=ddir, **kw)
