@@ -146,7 +146,7 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     return observations, ParameterSpace(tuple(plist)), [e.candidate for e in effects], forward, settings, out
 
 
-def _prefetch(obs, space, cands, forward, settings, which: Sequence[str]) -> int:
+def _prefetch(keys: Sequence[str], space, cands, forward, settings, which: Sequence[str]) -> int:
     """Run (into the cache) the designs :func:`validation.diagnose.planned_designs` lists."""
     from calibration.designs import latin_hypercube
 
@@ -168,7 +168,7 @@ def _prefetch(obs, space, cands, forward, settings, which: Sequence[str]) -> int
         for name in chosen:
             v, n, seed = names[name]
             sets += [forward.padded(v.effect_names, p) for p in v.parameter_sets(latin_hypercube(v.space, n, seed=seed))]
-        runner(tuple(forward.effects), sets, settings.replicates, tuple(obs.keys))
+        runner(tuple(forward.effects), sets, settings.replicates, tuple(keys))
         print(json.dumps({"prefetched": chosen, "sets": len(sets), "replicates": settings.replicates, "superset": True,
                           "wall_s": round(time.perf_counter() - t0, 1), "dem_worlds_run": forward.dem_worlds,
                           "launches": forward.log}), flush=True)
@@ -177,7 +177,7 @@ def _prefetch(obs, space, cands, forward, settings, which: Sequence[str]) -> int
         v, n, seed = names[name]
         t1 = time.perf_counter()
         X = latin_hypercube(v.space, n, seed=seed)
-        runner(v.effect_names, v.parameter_sets(X), settings.replicates, tuple(obs.keys))
+        runner(v.effect_names, v.parameter_sets(X), settings.replicates, tuple(keys))
         print(json.dumps({"prefetched": name, "sets": n, "replicates": settings.replicates,
                           "wall_s": round(time.perf_counter() - t1, 1), "dem_worlds_run": forward.dem_worlds}),
               flush=True)
@@ -197,6 +197,9 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
                     help="only run the designs the diagnosis needs before it sees the data (the base model and "
                          "each candidate; name some, e.g. 'base rolling_resistance', to split them over processes) "
                          "into the DEM cache, then stop")
+    ap.add_argument("--experiments", nargs="+", metavar="EXPERIMENT",
+                    help="with --prefetch: only these experiments' observables (one launch each), e.g. to keep "
+                         "each call of a time-limited GPU machine to one experiment")
     args = ap.parse_args(list(argv) if argv is not None else None)
     from .config import load_diagnosis_config
     from .diagnose import diagnose
@@ -213,7 +216,12 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
         print(f"warpdem diagnose: {exc}", file=sys.stderr)
         return 2
     if args.prefetch is not None:
-        return _prefetch(obs, space, cands, forward, settings, args.prefetch)
+        keys = [o.key for o in obs if not args.experiments or o.experiment in args.experiments]
+        if not keys:
+            print(f"warpdem diagnose: --experiments {args.experiments}: no measured observable of these experiments",
+                  file=sys.stderr)
+            return 2
+        return _prefetch(keys, space, cands, forward, settings, args.prefetch)
     print(f"warpdem diagnose: {len(list(obs))} observables, base parameters {space.names}, candidates "
           f"{[c.name for c in cands]}; output {out}", file=sys.stderr, flush=True)
     result = diagnose(obs, space, cands, forward, settings)
