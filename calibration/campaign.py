@@ -463,6 +463,9 @@ class Campaign:
         res["wall_s"] = round(time.perf_counter() - t_start, 1)
         (self.out / "results.json").write_text(json.dumps(_jsonable(res), indent=1))
         (self.out / "summary.md").write_text(summary_markdown(res))
+        from .report_campaign import write_campaign_report
+
+        write_campaign_report(_jsonable(res), self.out)  # report.html: verdict, warnings, figures
         self.log(f"done in {res['wall_s']} s: {self.out / 'summary.md'}")
         return res
 
