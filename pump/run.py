@@ -482,11 +482,25 @@ def run_config(cfg: dict, progress: bool = True, vtk: bool = True) -> int:
     results = analyse(case, rec)
     results["timings_s"] = case.timings
     results["config"] = cfg
-    results["fluid_coupling"] = case.fluid.describe()["coupling"]
+    results["fluid_coupling"] = fluid_coupling_summary(case.fluid)
     paths = write_outputs(case, rec, results, out)
+    fc = results["fluid_coupling"]
+    if fc["mode"] == "two-way":
+        print(f"pump: two-way coupling: largest cell fluid velocity change {fc['max_cell_velocity_change_m_s']:.3g} m/s "
+              f"({fc['cells_changed']} cells changed)")
     print(f"pump: {case.timings['steps']} steps in {case.timings['run_s']:.1f} s "
           f"({case.timings['steps'] / max(case.timings['run_s'], 1e-9):.0f} steps/s); report: {paths['report']}")
     return 0
+
+
+def fluid_coupling_summary(fluid) -> dict:
+    """Which coupling ran and, for two-way, the largest cell slowdown at the end [m/s]."""
+    out = {"mode": fluid.describe()["coupling"]}
+    if fluid.two_way:
+        du = fluid.fluid_velocity_change()
+        out.update(relaxation=fluid.relaxation, max_cell_velocity_change_m_s=float(np.linalg.norm(du, axis=-1).max()),
+                   cells_changed=int((np.linalg.norm(du, axis=-1) > 1e-6).sum()))
+    return out
 
 
 def save_json(path: Path, data: dict) -> None:
