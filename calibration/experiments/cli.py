@@ -205,6 +205,11 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         cfg = load_config(args.config)
+        out_dir = args.output or cfg.get("output") or f"experiment_{cfg['experiment']}_{cfg.get('scale', 'paper')}"
+        settings = dict(cfg.get("settings") or {})
+        if settings.get("vtk_every") is not None and settings.get("vtk_folder") is None:
+            settings["vtk_folder"] = str(Path(out_dir) / "vtk")  # the VTK series follows --output
+            cfg["settings"] = settings
         results, exp = run_config(cfg, device=args.device, progress=args.progress or None, processes=args.processes)
     except ConfigError as exc:
         print(f"warpdem experiment: configuration error: {exc}", file=sys.stderr)
