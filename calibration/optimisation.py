@@ -341,7 +341,13 @@ def plot_acceptable_set(
     order = np.argsort(-err)  # best points drawn last (on top)
     A, err = A[order], err[order]
     ref = None if reference is None else _as_vector(reference, names, "reference")
-    fig, axes = plt.subplots(d - 1, d - 1, figsize=(2.6 * (d - 1), 2.6 * (d - 1)), squeeze=False)
+    side = max(5.0, 3.0 * (d - 1))
+    fig, axes = plt.subplots(d - 1, d - 1, figsize=(side + 1.6, side + 0.8), squeeze=False, constrained_layout=True)
+    units = [p.unit for p in space.parameters]
+
+    def label(i: int) -> str:
+        return f"{names[i]} [{units[i]}]" if units[i] else names[i]
+
     sc = None
     for r in range(1, d):
         for c in range(d - 1):
@@ -350,24 +356,31 @@ def plot_acceptable_set(
                 ax.axis("off")
                 continue
             if len(A):
-                sc = ax.scatter(A[:, c], A[:, r], c=err, s=3, cmap="viridis", vmin=0, vmax=1, rasterized=True)
-            ax.plot(result.compromise_x[c], result.compromise_x[r], "r*", ms=13, mec="k", label="compromise")
+                sc = ax.scatter(A[:, c], A[:, r], c=err, s=4, cmap="viridis", vmin=0, vmax=1, rasterized=True,
+                                label="acceptable parameter sets")
+            ax.plot(result.compromise_x[c], result.compromise_x[r], "r*", ms=14, mec="k", label="compromise (NSGA-II)")
             if ref is not None:
-                ax.plot(ref[c], ref[r], "kX", ms=10, mfc="orange", label=reference_label)
+                ax.plot(ref[c], ref[r], "kX", ms=11, mfc="orange", label=reference_label)
             ax.set_xlim(space.lower[c], space.upper[c])
             ax.set_ylim(space.lower[r], space.upper[r])
+            ax.grid(alpha=0.3)
             if r == d - 1:
-                ax.set_xlabel(names[c])
+                ax.set_xlabel(label(c))
             if c == 0:
-                ax.set_ylabel(names[r])
+                ax.set_ylabel(label(r))
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    tol_txt = ", ".join(f"{n}: {t:.2f}+-{e:.2f}" for n, t, e in zip(result.response_names, result.targets, result.tolerance))
-    fig.suptitle(f"Acceptable set (n={len(result.acceptable_X)}): {tol_txt} deg", fontsize=9)
+    frac = len(result.acceptable_X)
+    tol_txt = "; ".join(f"{n} {t:.2f} ± {e:.2f} deg" for n, t, e in zip(result.response_names, result.targets,
+                                                                       result.tolerance))
+    fig.suptitle(f"Acceptable set: {frac} parameter sets whose predicted angles all lie within tolerance\n"
+                 f"targets: {tol_txt}", fontsize=10)
     if d > 2:
-        axes[0, d - 2].legend(handles, labels, loc="center")
+        axes[0, d - 2].legend(handles, labels, loc="center", fontsize=9)
+    else:
+        axes[0, 0].legend(handles, labels, loc="upper right", fontsize=8, framealpha=0.9)
     if sc is not None:
-        fig.colorbar(sc, ax=axes, shrink=0.6, label="max_k |y_k - t_k| / tol_k")
+        fig.colorbar(sc, ax=axes, shrink=0.8, label="largest |predicted - target| / tolerance (-)")
     if path is not None:
-        fig.savefig(path, dpi=120)
+        fig.savefig(path, dpi=130)
         plt.close(fig)
     return fig
