@@ -32,7 +32,7 @@ def plot_predicted_vs_simulated(
     path: str | None = None,
     Y_ref: np.ndarray | None = None,
     ref_label: str = "paper RBF",
-    label: str = "this work",
+    label: str = "surrogate of this calibration",
 ):
     """Predicted vs DEM-simulated responses with the 1:1 line (paper Figure 11).
 
@@ -52,8 +52,8 @@ def plot_predicted_vs_simulated(
         lo, hi = float(np.min(Ys[:, j])), float(np.max(Ys[:, j]))
         pad = 0.05 * (hi - lo)
         ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], "k--", lw=1)
-        ax.set_xlabel(f"DEM simulated {response_names[j]}")
-        ax.set_ylabel(f"predicted {response_names[j]}")
+        ax.set_xlabel(f"DEM-simulated {response_names[j]} [deg]")
+        ax.set_ylabel(f"surrogate-predicted {response_names[j]} [deg]")
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     if path is not None:
@@ -69,7 +69,7 @@ def plot_relative_errors(
     path: str | None = None,
     Y_ref: np.ndarray | None = None,
     ref_label: str = "paper RBF",
-    label: str = "this work",
+    label: str = "surrogate of this calibration",
     band_percent: float = 5.0,
 ):
     """Relative error (%) of each held-out sample, sample by sample (paper Figure 12).

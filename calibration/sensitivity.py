@@ -141,7 +141,7 @@ def plot_sensitivity(result: SobolResult, path: str | None = None, kind: str = "
     fig, axes = plt.subplots(1, m, figsize=(4.2 * m, 3.6), squeeze=False)
     for j in range(m):
         ax = axes[0, j]
-        bars = ax.bar(result.parameter_names, P[j], color="tab:blue", alpha=0.8, label=f"this work ({kind}-order, %)")
+        bars = ax.bar(result.parameter_names, P[j], color="tab:blue", alpha=0.8, label=f"this calibration ({kind}-order index, %)")
         ax.bar_label(bars, fmt="%.1f", fontsize=8)
         ax.plot(result.parameter_names, 100 * result.first_order[j] / max(np.maximum(result.total_order[j], 0).sum(), 1e-12),
                 "o", color="tab:orange", label="S1 share of sum ST (%)")
