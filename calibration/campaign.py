@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -109,8 +110,11 @@ def load_config(path: str | os.PathLike) -> CampaignConfig:
     path = Path(path)
     if not path.exists():
         raise ConfigError(f"calibration config not found: {path}")
-    with open(path) as fh:
-        raw = json.load(fh) if path.suffix == ".json" else yaml.safe_load(fh)
+    try:
+        with open(path) as fh:
+            raw = json.load(fh) if path.suffix == ".json" else yaml.safe_load(fh)
+    except (yaml.YAMLError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: not valid {'JSON' if path.suffix == '.json' else 'YAML'}: {exc}") from None
     return parse_config(raw, base_dir=path.parent, source=str(path))
 
 
@@ -301,10 +305,23 @@ class Campaign:
     def _done(self) -> dict[tuple[int, str], dict]:
         done: dict[tuple[int, str], dict] = {}
         if self.samples_path.exists():
-            for line in self.samples_path.read_text().splitlines():
-                if line.strip():
+            lines = self.samples_path.read_text().splitlines()
+            for k, line in enumerate(lines):
+                if not line.strip():
+                    continue
+                try:
                     rec = json.loads(line)
-                    done[(rec["index"], rec["response"])] = rec
+                except json.JSONDecodeError:
+                    if k == len(lines) - 1:  # torn by an interrupted write: cut it off, that sample runs again
+                        self.log(f"{self.samples_path}: last line is incomplete (interrupted write); "
+                                 "its sample will run again")
+                        tmp = self.samples_path.with_suffix(".jsonl.tmp")
+                        tmp.write_text("".join(ln + "\n" for ln in lines[:k]))
+                        os.replace(tmp, self.samples_path)
+                        continue
+                    raise ConfigError(f"{self.samples_path}: line {k + 1} is not valid JSON; the record file is "
+                                      "damaged (move it away to start the campaign afresh)") from None
+                done[(rec["index"], rec["response"])] = rec
         return done
 
     def run_design(self, progress: bool = True, max_samples: int | None = None,
@@ -376,6 +393,9 @@ class Campaign:
         t0 = time.perf_counter()
         done = self.run_design(progress)
         res["campaign_wall_s"] = round(time.perf_counter() - t0, 1)
+        # DEM time of the design over every session (a resumed campaign ran part of it before)
+        batches = {(r["response"], r.get("wall_s"), r.get("worlds")) for r in done.values() if r.get("wall_s")}
+        res["design_dem_wall_s_all_sessions"] = round(sum(b[1] for b in batches), 1)
         X = self.design()
         rnames = [r.name for r in cfg.responses]
         Y = np.array([[done[(i, n)]["angle_deg"] if done[(i, n)]["status"] == "ok" else np.nan for n in rnames]
@@ -487,7 +507,8 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
         lines.append(f"- {n}: {t['deg']:.3f} deg ({t['source']}{spread})")
     d = res["design"]
     lines += ["", f"## Design: {d['samples']} Latin hypercube samples ({d['held_out']} held out), "
-              f"{len(d['failed'])} failed runs, campaign wall time {res['campaign_wall_s']} s", ""]
+              f"{len(d['failed'])} failed runs; design DEM time {res.get('design_dem_wall_s_all_sessions', '?')} s "
+              f"over all sessions ({res['campaign_wall_s']} s in this one)", ""]
     s = res["surrogate"]
     if "held_out" in s:
         r2 = np.atleast_1d(s["held_out"]["r2"])
@@ -542,8 +563,15 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.only is not None and args.max_samples is None:
         ap.error("--only needs --max-samples (the analysis uses every response)")
-    cfg = load_config(args.config)
+    try:
+        cfg = load_config(args.config)
+    except ConfigError as exc:
+        print(f"warpdem calibrate: configuration error: {exc}", file=sys.stderr)
+        return 2
     if args.device:
+        if str(args.device).startswith("cuda") and not wp.is_cuda_available():
+            print(f"warpdem calibrate: --device {args.device}: no CUDA device here (use cpu)", file=sys.stderr)
+            return 2
         cfg.device = args.device
     campaign = Campaign(cfg, args.out)
     if args.max_samples is not None:

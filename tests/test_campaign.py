@@ -229,3 +229,31 @@ def test_quick_effects_campaign_runs_end_to_end(tmp_path):
         assert c["dem_deg"] is not None
     summary = (tmp_path / "summary.md").read_text()
     assert "rolling:epsd2+cohesion:sjkr" in summary and "elongated" in summary
+
+
+def test_torn_last_record_line_reruns_its_sample_and_a_damaged_file_is_named(tmp_path, fake_dem):
+    cfg = cp.parse_config({**BASE, "output": str(tmp_path)})
+    camp = cp.Campaign(cfg, tmp_path, verbose=False)
+    camp.run_design(progress=False)
+    lines = camp.samples_path.read_text().splitlines()
+    camp.samples_path.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][: len(lines[-1]) // 2])
+    done = camp._done()
+    assert len(done) == len(lines) - 1  # the torn record is dropped, its sample runs again
+    camp.run_design(progress=False)
+    assert len(camp._done()) == len(lines)
+    camp.samples_path.write_text("{broken\n" + "\n".join(lines) + "\n")
+    with pytest.raises(ConfigError, match="line 1 is not valid JSON"):
+        camp._done()
+
+
+def test_calibrate_cli_reports_config_errors_without_traceback(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: [unclosed\n")
+    assert cp.calibrate_main([str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "not valid YAML" in err and str(bad) in err and "Traceback" not in err
+    assert cp.calibrate_main([str(tmp_path / "missing.yaml")]) == 2
+    assert "not found" in capsys.readouterr().err
+    bad.write_text(json.dumps({**BASE, "parameters": {"mu_s_pp": [0.1, 20.0]}}))
+    assert cp.calibrate_main([str(bad)]) == 2
+    assert "outside its admissible range" in capsys.readouterr().err
