@@ -724,8 +724,22 @@ def cpu_processes(processes: int | str | None, device: str | None) -> int:
     return 1 if str(dev).startswith("cuda") else n
 
 
+def die_with_parent() -> None:
+    """Linux: ask the kernel to kill this process when its parent dies (``kill -9`` of a campaign
+    must not leave orphaned pool workers holding memory). A no-op elsewhere."""
+    import ctypes
+    import signal
+
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
+
+
 def _load_worker_plugins(plugins: tuple[str, ...]) -> None:
-    """Pool initializer: import the plugin modules a contact law names."""
+    """Pool initializer: die with the parent; import the plugin modules a contact law names."""
+    die_with_parent()
     if plugins:
         from ..model_description import load_plugins
 
