@@ -222,6 +222,8 @@ def test_cli_writes_results_and_pictures(tmp_path):
     assert r["scale"] == "quick" and r["protocol"]["deviations_from_paper"]["lift_speed"]["paper"] == 0.01
     assert r["timing"]["steps"] > 0 and r["contact_parameters"]["mu_s_pp"] == pytest.approx(0.5)
     assert (tmp_path / "out" / "world_000.png").stat().st_size > 1000
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "Experiment: cylinder" in html and "pile_height [m]" in html and "data:image/png;base64" in html
 
 
 def test_clump_material_runs_through_an_experiment():

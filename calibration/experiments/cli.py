@@ -222,6 +222,9 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
     if not args.no_plots:
         for r in results:
             plot_result(r, out / f"world_{r.world:03d}.png")
+    from .report import write_experiment_report
+
+    report = write_experiment_report(results, exp, out)
     for r in results:
         line = {"experiment": r.experiment, "scale": r.scale, "world": r.world, "status": r.status,
                 r.angle_name: None if r.angle_deg is None else round(r.angle_deg, 3), "parameters": r.parameters}
@@ -240,7 +243,7 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
             line["error"] = r.error
         print(json.dumps(line))
     t = results[0].timing
-    print(json.dumps({"output": str(out), "wall_s": t["wall_s"], "steps": t["steps"], "simulated_s": t["simulated_s"],
+    print(json.dumps({"output": str(out), "report": str(report), "wall_s": t["wall_s"], "steps": t["steps"], "simulated_s": t["simulated_s"],
                       "spheres": t["spheres"], "worlds": t["worlds"], "device": t["device"]}))
     return 0 if all(r.ok for r in results) else 1
 
