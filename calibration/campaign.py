@@ -324,6 +324,27 @@ class Campaign:
                 done[(rec["index"], rec["response"])] = rec
         return done
 
+    def _check_records_match_design(self, done: Mapping[tuple[int, str], dict], X: np.ndarray,
+                                    names: Sequence[str]) -> None:
+        """Refuse records made with another design (other ranges, seed, sample count or response
+        names): matched by sample number alone they would pair new points with old angles."""
+        responses = {r.name for r in self.cfg.responses}
+        for (i, name), rec in sorted(done.items()):
+            where = f"{self.samples_path}: sample {i} of response '{name}'"
+            if name not in responses:
+                raise ConfigError(f"{where}: this config has no such response ({sorted(responses)}); the records "
+                                  "belong to another campaign: use a new output folder (--out)")
+            if i >= len(X):
+                raise ConfigError(f"{where}: the design now has only {len(X)} samples; the records belong to "
+                                  "another design: use a new output folder (--out)")
+            given = rec.get("parameters") or {}
+            for j, n in enumerate(names):
+                v = given.get(n)
+                if v is None or not np.isclose(float(v), X[i, j], rtol=1e-9, atol=1e-12):
+                    raise ConfigError(f"{where}: recorded {n} = {v} but the design now has {X[i, j]:.6g}; the "
+                                      "design changed (range, seed or sample count) since these records were "
+                                      "made: use a new output folder (--out) or delete samples.jsonl")
+
     def run_design(self, progress: bool = True, max_samples: int | None = None,
                    retry_failed: bool = False, responses: Sequence[str] | None = None) -> dict[tuple[int, str], dict]:
         """Run every (sample, response) not yet in ``samples.jsonl``, batch by batch.
@@ -335,6 +356,7 @@ class Campaign:
         X = self.design()
         names = [p.name for p in self.cfg.space.parameters]
         done = self._done()
+        self._check_records_match_design(done, X, names)
         if retry_failed:
             done = {k: r for k, r in done.items() if r["status"] == "ok"}
         if max_samples is not None and max_samples < 1:
@@ -573,18 +595,22 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
             print(f"warpdem calibrate: --device {args.device}: no CUDA device here (use cpu)", file=sys.stderr)
             return 2
         cfg.device = args.device
-    campaign = Campaign(cfg, args.out)
-    if args.max_samples is not None:
-        t0 = time.perf_counter()
-        done = campaign.run_design(progress=not args.no_progress, max_samples=args.max_samples,
-                                   retry_failed=args.retry_failed, responses=args.only)
-        for resp in cfg.responses:
-            recs = [r for (i, name), r in done.items() if name == resp.name]
-            ok = sum(r["status"] == "ok" for r in recs)
-            campaign.log(f"{resp.name}: {len(recs)} of {cfg.samples} samples done ({ok} ok)")
-        campaign.log(f"part finished in {time.perf_counter() - t0:.1f} s; run again to continue")
+    try:
+        campaign = Campaign(cfg, args.out)
+        if args.max_samples is not None:
+            t0 = time.perf_counter()
+            done = campaign.run_design(progress=not args.no_progress, max_samples=args.max_samples,
+                                       retry_failed=args.retry_failed, responses=args.only)
+            for resp in cfg.responses:
+                recs = [r for (i, name), r in done.items() if name == resp.name]
+                ok = sum(r["status"] == "ok" for r in recs)
+                campaign.log(f"{resp.name}: {len(recs)} of {cfg.samples} samples done ({ok} ok)")
+            campaign.log(f"part finished in {time.perf_counter() - t0:.1f} s; run again to continue")
+            return 0
+        if args.retry_failed:
+            campaign.run_design(progress=not args.no_progress, retry_failed=True)
+        campaign.run(progress=not args.no_progress)
         return 0
-    if args.retry_failed:
-        campaign.run_design(progress=not args.no_progress, retry_failed=True)
-    campaign.run(progress=not args.no_progress)
-    return 0
+    except ConfigError as exc:  # e.g. records of another design in the output folder
+        print(f"warpdem calibrate: {exc}", file=sys.stderr)
+        return 2

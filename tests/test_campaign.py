@@ -91,7 +91,10 @@ def test_target_design_confirmation_and_validation_never_share_a_fill(tmp_path, 
     # a resumed design with gaps: each remaining sample still gets its own fill (fill i for sample i)
     out = tmp_path / "resumed"
     out.mkdir()
-    pre = [json.dumps(dict(index=i, response=n, parameters={}, status="ok", error=None, angle_deg=30.0,
+    X = cp.Campaign(cfg, out, verbose=False).design()
+    names = [p.name for p in cfg.space.parameters]
+    pre = [json.dumps(dict(index=i, response=n, parameters={k: float(v) for k, v in zip(names, X[i])}, status="ok",
+                           error=None, angle_deg=30.0,
                            replicate_angles_deg=[30.0] * (2 if n == "alpha" else 1)))
            for i in (1, 2, 5) for n in ("alpha", "beta")]
     (out / "samples.jsonl").write_text("\n".join(pre) + "\n")
@@ -257,3 +260,19 @@ def test_calibrate_cli_reports_config_errors_without_traceback(tmp_path, capsys)
     bad.write_text(json.dumps({**BASE, "parameters": {"mu_s_pp": [0.1, 20.0]}}))
     assert cp.calibrate_main([str(bad)]) == 2
     assert "outside its admissible range" in capsys.readouterr().err
+
+
+def test_resume_refuses_records_of_another_design(tmp_path, fake_dem):
+    cfg = cp.parse_config({**BASE, "output": str(tmp_path)})
+    cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)
+    changed = cp.parse_config({**BASE, "parameters": {"mu_s_pp": [0.2, 0.8], "mu_s_pw": [0.1, 0.8]}})
+    with pytest.raises(ConfigError, match="the design changed"):
+        cp.Campaign(changed, tmp_path, verbose=False).run_design(progress=False)
+    reseeded = cp.parse_config({**BASE, "design": {**BASE["design"], "seed": 7}})
+    with pytest.raises(ConfigError, match="use a new output folder"):
+        cp.Campaign(reseeded, tmp_path, verbose=False).run_design(progress=False)
+    fewer = cp.parse_config({**BASE, "design": {**BASE["design"], "samples": 10}})
+    with pytest.raises(ConfigError, match="use a new output folder"):
+        cp.Campaign(fewer, tmp_path, verbose=False).run_design(progress=False)
+    # the same design resumes as before
+    assert len(cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)) == 32
