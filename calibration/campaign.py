@@ -89,6 +89,61 @@ class CampaignConfig:
     base_dir: Path = Path(".")
 
 
+def _check_sections(raw: Mapping[str, Any], source: str) -> None:
+    """Sub-keys and values of the optimisation, confirmation, sensitivity, surrogate and design
+    sections (pydantic): an unknown key such as ``confirmation: {run: 5}`` is an error, not a silent
+    default. Every problem is listed with its path."""
+    from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+    class _S(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+
+    class Optimisation(_S):
+        pop_size: int = Field(100, ge=4)
+        n_generations: int = Field(100, ge=1)
+        seed: int = Field(1, ge=0)
+        tolerance_deg: float | list[float] | None = None
+        n_dense: int = Field(50_000, ge=100)
+
+    class Confirmation(_S):
+        runs: int = Field(1, ge=1)
+        refine_rounds: int = Field(0, ge=0)
+
+    class Sensitivity(_S):
+        n: int = Field(4096, ge=16)
+
+    class Surrogate(_S):
+        n_splits: int = Field(5, ge=2)
+        n_repeats: int = Field(2, ge=1)
+
+    class Design(_S):
+        samples: int = Field(24, ge=2)
+        held_out: int = Field(6, ge=0)
+        seed: int = Field(0, ge=0)
+
+    class Sections(BaseModel):
+        model_config = ConfigDict(extra="ignore")
+        optimisation: Optimisation = Field(default_factory=Optimisation)
+        confirmation: Confirmation = Field(default_factory=Confirmation)
+        sensitivity: Sensitivity = Field(default_factory=Sensitivity)
+        surrogate: Surrogate = Field(default_factory=Surrogate)
+        design: Design = Field(default_factory=Design)
+
+    present = {k: (raw.get(k) or {}) for k in ("optimisation", "confirmation", "sensitivity", "surrogate", "design")}
+    try:
+        Sections.model_validate(present)
+    except ValidationError as exc:
+        lines = []
+        for e in exc.errors():
+            path = ".".join(str(p) for p in e["loc"])
+            msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+            lines.append(f"  {path}: {msg} (got {e.get('input')!r})")
+        raise ConfigError(f"{source}: {len(lines)} problem(s) in the config:\n" + "\n".join(lines)) from None
+    tol = (raw.get("optimisation") or {}).get("tolerance_deg")
+    if tol is not None and any(float(t) <= 0 for t in np.atleast_1d(tol)):
+        raise ConfigError(f"{source}: optimisation.tolerance_deg must be > 0 deg, got {tol!r}")
+
+
 def _response(d: Any, where: str) -> Response:
     if not isinstance(d, Mapping):
         raise ConfigError(f"{where}: expected a mapping with keys {sorted(RESPONSE_KEYS)}, got {d!r}")
@@ -127,6 +182,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
     for k in ("parameters", "responses"):
         if k not in raw:
             raise ConfigError(f"{source}: missing '{k}'")
+    _check_sections(raw, source)
     model = ModelDescription.from_config(raw, base_dir=base_dir, where=source)
     params = raw["parameters"]
     if not isinstance(params, Mapping) or not params:

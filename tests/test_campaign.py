@@ -276,3 +276,15 @@ def test_resume_refuses_records_of_another_design(tmp_path, fake_dem):
         cp.Campaign(fewer, tmp_path, verbose=False).run_design(progress=False)
     # the same design resumes as before
     assert len(cp.Campaign(cfg, tmp_path, verbose=False).run_design(progress=False)) == 32
+
+
+def test_section_subkeys_and_values_checked_at_load():
+    with pytest.raises(ConfigError) as exc:
+        cp.parse_config({**BASE, "confirmation": {"run": 5}, "optimisation": {"pop_sise": 10, "n_generations": 0},
+                         "sensitivity": {"n": "many"}})
+    msg = str(exc.value)
+    for what in ("confirmation.run: unknown key", "optimisation.pop_sise: unknown key", "optimisation.n_generations",
+                 "sensitivity.n"):
+        assert what in msg, msg
+    with pytest.raises(ConfigError, match="tolerance_deg must be > 0"):
+        cp.parse_config({**BASE, "optimisation": {**BASE["optimisation"], "tolerance_deg": -1.0}})
