@@ -26,6 +26,23 @@ __all__ = ["BulkMaterial", "ParticleShape", "ParticleSample", "sample_particles"
            "equal_number_size_classes"]
 
 
+def diameter_range(value: Any, what: str, note: str = "") -> tuple[float, float]:
+    """``d`` or ``(d_min, d_max)`` [m] as ``(d_min, d_max)``; a clear ConfigError naming ``what``
+    for anything else (non-finite, d_min > d_max, or values that look like millimetres)."""
+    try:
+        d = np.atleast_1d(np.asarray(value, dtype=float)).ravel()
+    except (TypeError, ValueError):
+        d = np.zeros(0)
+    if d.size == 1:
+        d = np.array([d[0], d[0]])
+    if d.size != 2 or not np.all(np.isfinite(d)) or d[0] <= 0 or d[1] < d[0]:
+        raise ConfigError(f"{what}: diameter must be d > 0 m or (d_min, d_max) with 0 < d_min <= d_max [m]{note}, "
+                          f"got {value!r}")
+    if d[1] > 1.0:
+        raise ConfigError(f"{what}: diameter {d[1]} m looks like millimetres; give metres")
+    return float(d[0]), float(d[1])
+
+
 def scale_template(template, factor: float):
     """A clump template with every length multiplied by ``factor`` (same density):
     volume and mass scale with factor^3, principal inertia with factor^5."""
@@ -78,15 +95,8 @@ class ParticleShape:
 
         fam = shape_family(self.family)
         object.__setattr__(self, "values", tuple(sorted(fam.check_parameters(**dict(self.values)).items())))
-        d = np.atleast_1d(np.asarray(self.diameter, dtype=float)).ravel()
-        if d.size == 1:
-            d = np.array([d[0], d[0]])
-        if d.size != 2 or not np.all(np.isfinite(d)) or d[0] <= 0 or d[1] < d[0]:
-            raise ConfigError(f"shape '{self.family}': diameter must be d > 0 m or (d_min, d_max) with "
-                              f"0 < d_min <= d_max [m] (volume-equivalent), got {self.diameter!r}")
-        if d[1] > 1.0:
-            raise ConfigError(f"shape '{self.family}': diameter {d[1]} m looks like millimetres; give metres")
-        object.__setattr__(self, "diameter", (float(d[0]), float(d[1])))
+        object.__setattr__(self, "diameter", diameter_range(self.diameter, f"shape '{self.family}'",
+                                                            " (volume-equivalent)"))
         k = self.size_classes
         if isinstance(k, bool) or int(k) != k or int(k) < 1:
             raise ConfigError(f"shape '{self.family}': size_classes must be a positive integer, got {k!r}")
@@ -167,15 +177,7 @@ class BulkMaterial:
         if not (0.0 < float(self.solids_fraction) < 1.0):
             raise ConfigError(f"BulkMaterial: solids_fraction must lie in (0, 1), got {self.solids_fraction}")
         if self.diameter is not None:
-            d = np.atleast_1d(np.asarray(self.diameter, dtype=float)).ravel()
-            if d.size == 1:
-                d = np.array([d[0], d[0]])
-            if d.size != 2 or not np.all(np.isfinite(d)) or d[0] <= 0 or d[1] < d[0]:
-                raise ConfigError(f"BulkMaterial: diameter must be d > 0 m or (d_min, d_max) with "
-                                  f"0 < d_min <= d_max [m], got {self.diameter!r}")
-            if d[1] > 1.0:
-                raise ConfigError(f"BulkMaterial: diameter {d[1]} m looks like millimetres; give metres")
-            object.__setattr__(self, "diameter", (float(d[0]), float(d[1])))
+            object.__setattr__(self, "diameter", diameter_range(self.diameter, "BulkMaterial"))
         else:
             mix = []
             for item in self.clumps:
