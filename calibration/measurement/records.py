@@ -676,6 +676,26 @@ def _video(V: _V, v: Any, key: str) -> dict[str, Any]:
     }
 
 
+def _angle_data(V: _V, rec: ConditionRecord, d: dict, data: str, kk: str, settings: dict,
+                rng: dict) -> None:
+    """Fill ``rec`` from a condition's angle data (v1 and v2): repeats (a number or a list of
+    views each, within ``rng``) or slopes, images, or a video."""
+    if data in ("angles_deg", "repeats", "slopes"):
+        reps = d[data]
+        if not isinstance(reps, list):
+            raise V.err(kk, f"expected a list of repeats, got {type(reps).__name__}")
+        if not reps:
+            raise V.err(kk, "empty repeats")
+        for i, r in enumerate(reps):
+            rec.repeats.append(V.numbers(r, f"{kk}[{i}]", **rng) if isinstance(r, list)
+                               else V.number(r, f"{kk}[{i}]", **rng))
+    elif data == "images":
+        rec.images = _images(V, d["images"], settings, kk)
+    else:  # video
+        rec.video = _video(V, d["video"], kk)
+        rec.video_settings = settings
+
+
 def _condition(V: _V, exp: str, kind: str, name: str, d: Any, key: str) -> ConditionRecord:
     d = V.mapping(d, key)
     V.keys(d, _COND_KEYS, key)
@@ -713,22 +733,8 @@ def _condition(V: _V, exp: str, kind: str, name: str, d: Any, key: str) -> Condi
     settings = _image_settings(V, d["image_settings"], f"{key}.image_settings") if "image_settings" in d else {}
     if "image_settings" in d and data not in ("images", "video"):
         raise V.err(f"{key}.image_settings", f"only allowed with images or video, not with {data}")
-    kk = f"{key}.{data}"
-    if data in ("angles_deg", "slopes"):
-        reps = d[data]
-        if not isinstance(reps, list):
-            raise V.err(kk, f"expected a list of repeats, got {type(reps).__name__}")
-        if not reps:
-            raise V.err(kk, "empty repeats")
-        rng = dict(lo=0.0, hi=90.0, hi_open=True) if data == "angles_deg" else {}
-        for i, r in enumerate(reps):
-            rec.repeats.append(V.numbers(r, f"{kk}[{i}]", **rng) if isinstance(r, list)
-                               else V.number(r, f"{kk}[{i}]", **rng))
-    elif data == "images":
-        rec.images = _images(V, d["images"], settings, kk)
-    else:  # video
-        rec.video = _video(V, d["video"], kk)
-        rec.video_settings = settings
+    _angle_data(V, rec, d, data, f"{key}.{data}", settings,
+                dict(lo=0.0, hi=90.0, hi_open=True) if data == "angles_deg" else {})
     if average == "slope" and data == "angles_deg":
         raise V.err(f"{key}.average", "average 'slope' needs slopes, images or a video, not angles_deg")
     return rec
@@ -820,22 +826,7 @@ def _angle_record(V: _V, exp: str, cond: str, data: str, d: dict, key: str) -> C
     settings = _image_settings(V, d["image_settings"], f"{key}.image_settings") if "image_settings" in d else {}
     rec = ConditionRecord(experiment=exp, name=cond, kind=kind,
                           data="angles_deg" if data == "repeats" else data, average=average)
-    kk = f"{key}.{data}"
-    if data in ("repeats", "slopes"):
-        reps = d[data]
-        if not isinstance(reps, list):
-            raise V.err(kk, f"expected a list of repeats, got {type(reps).__name__}")
-        if not reps:
-            raise V.err(kk, "empty repeats")
-        rng = _UNIT_RANGES["deg"] if data == "repeats" else {}
-        for i, r in enumerate(reps):
-            rec.repeats.append(V.numbers(r, f"{kk}[{i}]", **rng) if isinstance(r, list)
-                               else V.number(r, f"{kk}[{i}]", **rng))
-    elif data == "images":
-        rec.images = _images(V, d["images"], settings, kk)
-    else:
-        rec.video = _video(V, d["video"], kk)
-        rec.video_settings = settings
+    _angle_data(V, rec, d, data, f"{key}.{data}", settings, _UNIT_RANGES["deg"] if data == "repeats" else {})
     return rec
 
 
