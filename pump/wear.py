@@ -104,11 +104,8 @@ def record_wall_impacts(
             continue
         kw = -tag - 1
         cp = slot_point[base + s]
-        v_wall = wp.vec3(0.0)
-        if wk.wall_is_moving(t_now, wall_t_start[kw], wall_t_stop[kw]):
-            tau = wk.wall_motion_time(t_now, wall_t_start[kw], wall_t_stop[kw])
-            centre = wall_origin[kw] + wall_lin_vel[kw] * float(tau)
-            v_wall = wall_lin_vel[kw] + wp.cross(wall_ang_vel[kw], cp - centre)
+        v_wall = wk.wall_point_velocity(t_now, wall_t_start[kw], wall_t_stop[kw], wall_origin[kw], wall_lin_vel[kw],
+                                        wall_ang_vel[kw], cp)
         v_rel = body_v[b] + wp.cross(body_w[b], cp - body_q[b]) - v_wall
         v_n = -wp.dot(v_rel, nrm)
         if v_n <= 0.0:

@@ -77,6 +77,17 @@ def wall_is_moving(t: wp.float64, t_start: float, t_stop: float):
     return t >= wp.float64(t_start) and t < wp.float64(t_stop)
 
 
+@wp.func
+def wall_point_velocity(t: wp.float64, t_start: float, t_stop: float, origin: wp.vec3, lin_vel: wp.vec3,
+                        ang_vel: wp.vec3, point: wp.vec3):
+    """Velocity [m/s] of the wall material at ``point`` at time ``t``: v + w x (p - c(t)), with
+    c(t) the rotation centre moved with the wall; zero outside the motion's time window."""
+    if not wall_is_moving(t, t_start, t_stop):
+        return wp.vec3(0.0)
+    centre = origin + lin_vel * float(wall_motion_time(t, t_start, t_stop))
+    return lin_vel + wp.cross(ang_vel, point - centre)
+
+
 @wp.kernel
 def place_wall_vertices(
     rest: wp.array(dtype=wp.vec3),
@@ -614,13 +625,11 @@ def contact_kernel(law: ContactLaw):
                         if wp.static(roll_hist):
                             roll = roll_in[base + o]
             # wall kinematics at the contact point
-            v_wall = wp.vec3(0.0)
+            v_wall = wall_point_velocity(t_now, wall_t_start[kw], wall_t_stop[kw], wall_origin[kw], wall_lin_vel[kw],
+                                         wall_ang_vel[kw], cp)
             w_wall = wp.vec3(0.0)
             if wall_is_moving(t_now, wall_t_start[kw], wall_t_stop[kw]):
-                tau = wall_motion_time(t_now, wall_t_start[kw], wall_t_stop[kw])
-                centre = wall_origin[kw] + wall_lin_vel[kw] * float(tau)
                 w_wall = wall_ang_vel[kw]
-                v_wall = wall_lin_vel[kw] + wp.cross(w_wall, cp - centre)
             mw = wall_material[kw]
             e_w = mat_e[mw]
             nu_w = mat_nu[mw]

@@ -167,7 +167,6 @@ class DEMSolver:
             self.world_paused, self.bad], device=d)
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
 
-
     def apply_body_forces(self, state_in: State, state_out: State, dt: float) -> wp.array:
         """Per-body force [N] of the body-force models for this step (device only, capturable):
         starts from the external force (if used) or zero, each model adds its part."""
