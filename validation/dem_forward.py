@@ -209,7 +209,9 @@ class DEMForwardModel(ForwardModel):
     def _run_worlds(self, exp_name: str, settings: Mapping[str, Any], desc: ModelDescription,
                     parameter_sets: Sequence[Mapping[str, float]], todo: list) -> None:
         """Run the missing worlds of one experiment in one launch and cache their observables."""
-        first_fill = DESIGN_FILLS + len(self._cache) + 1000 * len(self.log)
+        # every world ever run is one cache record, so fills numbered after them are new ones, also
+        # across resumed sessions (processes sharing one cache at once may draw the same fills)
+        first_fill = DESIGN_FILLS + len(self._cache)
         exp = self._experiment(exp_name, settings, desc, first_fill)
         sets = []
         for i, r, rpm, _ in todo:
