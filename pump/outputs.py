@@ -133,7 +133,7 @@ class VTKWriter:
         for wi, key in ((case.impeller_wall, "impeller"), (case.casing_wall, "casing")):
             w = m.walls[wi]
             name = f"{key}_{self.k:05d}.vtp"
-            write_vtp(self.dir / name, w.mesh.points.numpy(), w.faces, cell_data=_float32(wall_cell_data(case, wi)))
+            write_vtp(self.dir / name, w.points_at(t).astype(np.float32), w.faces, cell_data=_float32(wall_cell_data(case, wi)))
             self.frames[key].append((t, name))
         self.k += 1
 

@@ -72,7 +72,7 @@ def wall_surfaces(sim, world: int | None = None) -> list[tuple[str, object]]:
     for wi, w in enumerate(m.walls):
         if world is not None and w.world not in (-1, world):
             continue
-        pts = w.mesh.points.numpy().astype(np.float64)
+        pts = w.points_at(sim.time)
         faces = np.hstack([np.full((w.num_triangles, 1), 3), w.faces]).ravel()
         mesh = pv.PolyData(pts, faces)
         for field in sim.solver.wall_stats.FIELDS:

@@ -88,28 +88,28 @@ def wall_point_velocity(t: wp.float64, t_start: float, t_stop: float, origin: wp
     return lin_vel + wp.cross(ang_vel, point - centre)
 
 
-@wp.kernel
-def place_wall_vertices(
-    rest: wp.array(dtype=wp.vec3),
-    lin_vel: wp.vec3,
-    ang_vel: wp.vec3,
-    origin: wp.vec3,
-    t_start: float,
-    t_stop: float,
-    time: wp.array(dtype=wp.float64),
-    points: wp.array(dtype=wp.vec3),
-):
-    """x(t) = c + R(w tau)(x0 - c) + v tau  for a wall translating at v and rotating at w about c."""
-    i = wp.tid()
-    tau = wall_motion_time(time[0], t_start, t_stop)
+@wp.func
+def wall_rotation(t: wp.float64, t_start: float, t_stop: float, ang_vel: wp.vec3):
+    """Rotation R(w tau) of a wall turning at ``ang_vel`` [rad/s] for tau = elapsed motion time
+    (the angle is reduced modulo 2 pi in float64 so that long runs keep float32 precision)."""
     w_len = wp.length(ang_vel)
-    x = rest[i] - origin
     if w_len > 0.0:
-        angle = wp.float64(w_len) * tau
+        angle = wp.float64(w_len) * wall_motion_time(t, t_start, t_stop)
         angle = angle - wp.float64(2.0 * wp.pi) * wp.floor(angle / wp.float64(2.0 * wp.pi))
-        q = wp.quat_from_axis_angle(ang_vel / w_len, float(angle))
-        x = wp.quat_rotate(q, x)
-    points[i] = origin + x + lin_vel * float(tau)
+        return wp.quat_from_axis_angle(ang_vel / w_len, float(angle))
+    return wp.quat_identity()
+
+
+@wp.func
+def wall_centre(t: wp.float64, t_start: float, t_stop: float, origin: wp.vec3, lin_vel: wp.vec3):
+    """Where the wall's rotation centre is at time t: c(t) = c0 + v tau [m]."""
+    return origin + lin_vel * float(wall_motion_time(t, t_start, t_stop))
+
+
+# A wall moves rigidly: a point x0 of its rest mesh is at  x(t) = c(t) + R(w tau) (x0 - c0).
+# The engine never moves the mesh: a sphere at x is looked up in the rest mesh at
+# x0 = c0 + R^T (x - c(t)), and the closest point and normal found there are mapped back.
+# So no wall needs its vertices placed and its BVH refitted each step.
 
 
 # ----------------------------------------------------------------------------- bodies
@@ -326,9 +326,9 @@ def build_neighbour_list(
     skin: float,
     max_neighbours: int,
     wall_mesh: wp.array(dtype=wp.uint64),
-    wall_world: wp.array(dtype=int),
+    world_wall_start: wp.array(dtype=int),
+    world_wall_index: wp.array(dtype=int),
     wall_moving: wp.array(dtype=int),
-    num_walls: int,
     nb_count: wp.array(dtype=int),
     nb_index: wp.array(dtype=int),
     near_wall: wp.array(dtype=int),
@@ -337,8 +337,8 @@ def build_neighbour_list(
     rebuild: wp.array(dtype=int),
 ):
     """Verlet list: spheres of the same world and another body within r_i + r_j + skin,
-    sorted by index; and whether a static wall lies within r_i + skin (its BVH is then
-    queried each step). Valid while no sphere moves more than skin / 2. Does nothing unless
+    sorted by index; and whether a static wall of its world lies within r_i + skin (its BVH
+    is then queried each step; ``world_wall_start/index``: the walls of each world, CSR). Valid while no sphere moves more than skin / 2. Does nothing unless
     ``rebuild[0]`` is set, so the launch can sit unconditionally in a CUDA graph."""
     if rebuild[0] == 0:
         return
@@ -379,9 +379,10 @@ def build_neighbour_list(
     near = int(0)
     if body_active[b] != 0:
         ext = wp.vec3(ri + skin, ri + skin, ri + skin)
-        for k in range(num_walls):
-            ww = wall_world[k]
-            if wall_moving[k] != 0 or (ww >= 0 and ww != sphere_world[i]):
+        wi = sphere_world[i]
+        for kk in range(world_wall_start[wi], world_wall_start[wi + 1]):
+            k = world_wall_index[kk]
+            if wall_moving[k] != 0:
                 continue
             mq = wp.mesh_query_aabb(wall_mesh[k], xi - ext, xi + ext)
             tri = int(0)
@@ -453,7 +454,8 @@ def contact_kernel(law: ContactLaw):
         params: wp.array2d(dtype=float),
         max_radius: float,
         wall_mesh: wp.array(dtype=wp.uint64),
-        wall_world: wp.array(dtype=int),
+        world_wall_start: wp.array(dtype=int),
+        world_wall_index: wp.array(dtype=int),
         wall_material: wp.array(dtype=int),
         wall_tri_offset: wp.array(dtype=int),
         wall_lin_vel: wp.array(dtype=wp.vec3),
@@ -461,7 +463,7 @@ def contact_kernel(law: ContactLaw):
         wall_origin: wp.array(dtype=wp.vec3),
         wall_t_start: wp.array(dtype=float),
         wall_t_stop: wp.array(dtype=float),
-        num_walls: int,
+        walls_on: int,
         total_tris: int,
         time: wp.array(dtype=wp.float64),
         dt: float,
@@ -529,28 +531,43 @@ def contact_kernel(law: ContactLaw):
 
         # ---- (1) wall contacts: collect, merging triangles whose normals agree
         close_to_static_wall = near_wall[i]
-        for k in range(num_walls):
-            ww = wall_world[k]
-            if ww >= 0 and ww != world:
-                continue
-            if wall_moving[k] == 0 and close_to_static_wall == 0:
+        n_walls_here = world_wall_start[world + 1] - world_wall_start[world]
+        if walls_on == 0:
+            n_walls_here = 0
+        for kk in range(n_walls_here):
+            k = world_wall_index[world_wall_start[world] + kk]
+            moving = wall_moving[k]
+            if moving == 0 and close_to_static_wall == 0:
                 continue
             mesh = wall_mesh[k]
             tag = -(k + 1)
             ext = wp.vec3(ri, ri, ri)
-            mquery = wp.mesh_query_aabb(mesh, xi - ext, xi + ext)
+            # the sphere in the wall's rest frame (static walls: the same point)
+            rot = wp.quat_identity()
+            c_now = wp.vec3(0.0)
+            c_rest = wp.vec3(0.0)
+            x_rest = xi
+            if moving != 0:
+                rot = wall_rotation(t_now, wall_t_start[k], wall_t_stop[k], wall_ang_vel[k])
+                c_rest = wall_origin[k]
+                c_now = wall_centre(t_now, wall_t_start[k], wall_t_stop[k], c_rest, wall_lin_vel[k])
+                x_rest = c_rest + wp.quat_rotate_inv(rot, xi - c_now)
+            mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
             tri = int(0)
             while wp.mesh_query_aabb_next(mquery, tri):
                 m = wp.mesh_get(mesh)
                 pa = m.points[m.indices[3 * tri + 0]]
                 pb = m.points[m.indices[3 * tri + 1]]
                 pc = m.points[m.indices[3 * tri + 2]]
-                cp = closest_point_triangle(xi, pa, pb, pc)
-                d = xi - cp
+                cp = closest_point_triangle(x_rest, pa, pb, pc)
+                d = x_rest - cp
                 dist = wp.length(d)
                 if dist >= ri or dist < 1.0e-12:
                     continue
                 nrm = d / dist
+                if moving != 0:  # back to the world frame
+                    nrm = wp.quat_rotate(rot, nrm)
+                    cp = c_now + wp.quat_rotate(rot, cp - c_rest)
                 depth = ri - dist
                 # A candidate and a collected contact describe one contact if their normals
                 # agree, or if the shallower one's contact point lies on (or behind) the

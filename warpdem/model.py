@@ -71,12 +71,30 @@ class Wall:
     tri_offset: int
     triangle_labels: np.ndarray | None = None
     label_names: tuple[str, ...] = ()
-    mesh: wp.Mesh | None = field(default=None, repr=False)
-    rest_points: wp.array | None = field(default=None, repr=False)
+    mesh: wp.Mesh | None = field(default=None, repr=False)  # the rest mesh; never moved
 
     @property
     def num_triangles(self) -> int:
         return int(self.faces.shape[0])
+
+    def points_at(self, time: float) -> np.ndarray:
+        """Vertex positions [m] at ``time`` [s]: x(t) = c(t) + R(w tau) (x0 - c0), with
+        tau = clamp(t, start, stop) - start and c(t) = c0 + v tau (the engine's kernels query
+        the rest mesh at the sphere mapped back by the inverse of this motion)."""
+        m = self.motion
+        x0 = np.asarray(self.vertices, dtype=np.float64)
+        if m.is_static:
+            return x0.copy()
+        tau = min(max(float(time), m.start), m.stop) - m.start
+        c0 = np.asarray(m.origin, dtype=np.float64)
+        w = np.asarray(m.angular_velocity, dtype=np.float64)
+        rel = x0 - c0
+        angle = float(np.linalg.norm(w)) * tau
+        if angle > 0.0:  # Rodrigues' rotation formula
+            k = w / np.linalg.norm(w)
+            rel = (rel * math.cos(angle) + np.cross(k, rel) * math.sin(angle)
+                   + np.outer(rel @ k, k) * (1.0 - math.cos(angle)))
+        return c0 + np.asarray(m.velocity, dtype=np.float64) * tau + rel
 
 
 class Model:
@@ -120,14 +138,24 @@ class Model:
         self.mat_nu = wp.array(np.array([m.poisson_ratio for m in materials]), dtype=float, device=d)
         self.contact_params = wp.array(host["contact_params"], dtype=float, device=d)
         self.walls = walls
+        # walls move rigidly, so a mesh stays at rest and walls of equal geometry (one drum per
+        # world, each at its own speed) share one BVH
+        meshes: dict[tuple[bytes, bytes], wp.Mesh] = {}
         for w in walls:
-            w.rest_points = wp.array(w.vertices.astype(np.float32), dtype=vec, device=d)
-            w.mesh = wp.Mesh(points=wp.array(w.vertices.astype(np.float32), dtype=vec, device=d),
-                             indices=wp.array(w.faces.astype(np.int32).ravel(), dtype=int, device=d))
+            pts = np.ascontiguousarray(w.vertices, dtype=np.float32)
+            idx = np.ascontiguousarray(w.faces, dtype=np.int32).ravel()
+            key = (pts.tobytes(), idx.tobytes())
+            if key not in meshes:
+                meshes[key] = wp.Mesh(points=wp.array(pts, dtype=vec, device=d), indices=wp.array(idx, dtype=int, device=d))
+            w.mesh = meshes[key]
         self.total_triangles = int(sum(w.num_triangles for w in walls))
         n_walls = max(len(walls), 1)
         self.wall_mesh = wp.array([w.mesh.id for w in walls] or [0], dtype=wp.uint64, device=d)
-        self.wall_world = wp.array([w.world for w in walls] or [0], dtype=int, device=d)
+        # the walls of each world (CSR): walls of every world (world -1) and its own, in wall order
+        per_world = [[k for k, w in enumerate(walls) if w.world in (-1, j)] for j in range(self.num_worlds)]
+        self.world_wall_start = wp.array(np.cumsum([0] + [len(p) for p in per_world]), dtype=int, device=d)
+        self.world_wall_index = wp.array(np.concatenate([np.asarray(p, dtype=np.int64) for p in per_world] + [np.zeros(1, np.int64)]),
+                                         dtype=int, device=d)
         self.wall_material = wp.array([w.material for w in walls] or [0], dtype=int, device=d)
         self.wall_tri_offset = wp.array([w.tri_offset for w in walls] or [0], dtype=int, device=d)
         self.wall_lin_vel = wp.array([w.motion.velocity for w in walls] or [(0, 0, 0)], dtype=vec, device=d)

@@ -58,8 +58,8 @@ class WallStats:
 class DEMSolver:
     """Explicit DEM solver for a :class:`Model`.
 
-    Each step: place moving walls at t and refit their BVH; place member spheres from body
-    poses; rebuild the grouped hash grid (one group per world); evaluate contacts (one
+    Each step: place member spheres from body poses (walls move rigidly and are looked up in
+    their rest frame, so no wall mesh is moved or refitted); rebuild the grouped hash grid (one group per world); evaluate contacts (one
     thread per sphere, full neighbour list with per-sphere history slots); integrate bodies
     (semi-implicit Euler); advance time. Nothing is copied to the host inside a step.
 
@@ -141,13 +141,6 @@ class DEMSolver:
         m = self.model
         dt = self.dt if dt is None else float(dt)
         d = m.device
-        for i in self.moving_walls:
-            w = m.walls[i]
-            wp.launch(kernels.place_wall_vertices, dim=len(w.vertices),
-                      inputs=[w.rest_points, wp.vec3(*w.motion.velocity), wp.vec3(*w.motion.angular_velocity),
-                              wp.vec3(*w.motion.origin), float(w.motion.start), float(min(w.motion.stop, 3.0e38)),
-                              state_in.time, w.mesh.points], device=d)
-            w.mesh.refit()
         self.place_spheres(state_in)
         wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
                   inputs=[state_in.sphere_x, self.x_at_build, 0.5 * self.skin, self.rebuild], device=d)
@@ -197,7 +190,7 @@ class DEMSolver:
         self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
         wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[
             self.grid.id, state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active,
-            m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.wall_world, self.wall_moving, len(m.walls),
+            m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.world_wall_start, m.world_wall_index, self.wall_moving,
             self.nb_count, self.nb_index, self.near_wall, self.x_at_build, self.nb_overflow, self.rebuild],
             device=m.device)
         wp.launch(kernels.finish_build, dim=1, inputs=[self.rebuild, self.list_builds], device=m.device)
@@ -233,17 +226,18 @@ class DEMSolver:
         """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
         self.rebuild.fill_(1)
 
-    def launch_contacts(self, state_in: State, state_out: State, dt: float, num_walls: int | None = None) -> None:
-        """The contact kernel alone (the grid must be built for ``state_in``)."""
+    def launch_contacts(self, state_in: State, state_out: State, dt: float, walls_on: bool = True) -> None:
+        """The contact kernel alone (the grid must be built for ``state_in``); ``walls_on=False``
+        leaves the walls out (profiling)."""
         m = self.model
         d = m.device
         ws = self.wall_stats
-        nw = len(m.walls) if num_walls is None else num_walls
         wp.launch(self.kernel, dim=m.num_spheres, inputs=[
             self.nb_count, self.nb_index, self.max_neighbours, self.near_wall, self.wall_moving, self.views,
             m.sphere_world, m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
-            m.wall_mesh, m.wall_world, m.wall_material, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel,
-            m.wall_origin, m.wall_t_start, m.wall_t_stop, nw, m.total_triangles, state_in.time, dt,
+            m.wall_mesh, m.world_wall_start, m.world_wall_index, m.wall_material, m.wall_tri_offset, m.wall_lin_vel,
+            m.wall_ang_vel, m.wall_origin, m.wall_t_start, m.wall_t_stop, int(walls_on), m.total_triangles,
+            state_in.time, dt,
             m.max_contacts,
             state_in.contact_count, state_in.contact_partner, state_in.contact_spring, state_in.contact_roll,
             state_in.contact_wnormal,
