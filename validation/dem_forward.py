@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -220,8 +221,11 @@ class DEMForwardModel(ForwardModel):
                 s["rpm"] = float(rpm)
             sets.append(s)
         t0 = time.perf_counter()
+        print(f"DEM: {exp_name} {dict(settings) or ''}, {len(sets)} world(s) of {desc.contact_law.describe()}, "
+              f"{desc.material.name} ...", file=sys.stderr, flush=True)
         results = exp.run(sets, device=self.device, progress=self.progress, processes=self.processes)
         wall = time.perf_counter() - t0
+        print(f"DEM: {exp_name}: {len(sets)} world(s) in {wall:.1f} s", file=sys.stderr, flush=True)
         self.dem_seconds += wall
         self.dem_worlds += len(sets)
         self.log.append({"experiment": exp_name, "settings": dict(settings), "worlds": len(sets),

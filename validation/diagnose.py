@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,6 +211,7 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
     results = []
     for i, eff in enumerate(candidates):
+        _say(f"studying candidate '{eff.name}' ({i + 1} of {len(candidates)})")
         st = study_model(current.version.with_effect(eff), obs, runner, settings, _candidate_seed(seed, i), noise=noise)
         log_b = st.evidence.log_evidence - current.evidence.log_evidence
         sig = effect_signature(current, st, eff, z_now)
@@ -273,13 +275,20 @@ def diagnose(observables: Sequence[Observable] | Observations, base_space: Param
         return _diagnose(obs, base_space, cands, forward_model, settings)
 
 
+def _say(msg: str) -> None:
+    """One progress line on stderr (the report and JSON carry the results)."""
+    print(f"diagnose: {msg}", file=sys.stderr, flush=True)
+
+
 def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[CandidateEffect, ...],
               forward_model: ForwardModel, settings: DiagnosisSettings) -> DiagnosisResult:
     runner = ForwardRunner(forward_model)
     t_start = time.perf_counter()
     seconds: dict[str, float] = {}
+    _say("studying the base model")
     base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed)
     seconds["base_study"] = base.seconds
+    _say(f"base model studied in {base.seconds:.0f} s: {'adequate' if base.adequacy.adequate else 'inadequate'}")
     base_noise = (base.noise_sd, base.noise_dof)  # one variance model for every version (validation.study)
     versions = [base]
     history = ErrorHistory((_errors(base, settings),))
@@ -318,6 +327,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
             break
         pick = next(c for c in rnd.candidates if c.name == chosen)
         t0 = time.perf_counter()
+        _say(f"recalibrating with '{chosen}' added")
         recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise)
         seconds["recalibration"] += time.perf_counter() - t0
         versions.append(recal)

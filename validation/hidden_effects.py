@@ -179,8 +179,26 @@ def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, 
     return generate_cases([case], out, scale, repeats, device, processes, progress)
 
 
+# The synthetic lab's instruments: an angle is read to 0.5 deg (a protractor, or a line fitted to
+# a photographed slope), a bulk density to 1 kg/m^3 (scale and box volume), a height to 1 mm.
+# A "no pile" reading needs one: with every repeat flat there is no scatter to estimate from.
+READING_RESOLUTION = {"deg": 0.5, "kg/m^3": 1.0, "m": 0.001}
+
+
+def add_reading_resolution(doc: dict[str, Any]) -> dict[str, Any]:
+    """Give every observable of a v2 measurement document the lab's reading resolution for its unit
+    (:data:`READING_RESOLUTION`); an observable that already states one keeps it."""
+    for exp in doc.get("experiments", {}).values():
+        for cond in exp.get("conditions", {}).values():
+            for ob in cond.get("observables", {}).values():
+                if "resolution" not in ob and ob.get("unit") in READING_RESOLUTION:
+                    ob["resolution"] = READING_RESOLUTION[ob["unit"]]
+    return doc
+
+
 def _observables(reported: dict[str, str], rs: list) -> dict[str, Any]:
-    """The v2 observables of one condition from its repeats ("no pile" when no repeat formed one)."""
+    """The v2 observables of one condition from its repeats ("no pile" when no repeat formed one),
+    each with the lab's reading resolution."""
     obs: dict[str, Any] = {}
     for q, unit in reported.items():
         if q == "pile_formed":
@@ -194,6 +212,9 @@ def _observables(reported: dict[str, str], rs: list) -> dict[str, Any]:
         if any(v is None for v in vals):
             continue
         obs[q] = {"unit": unit, "repeats": [round(float(v), 6) for v in vals]}
+    for ob in obs.values():
+        if ob["unit"] in READING_RESOLUTION:
+            ob["resolution"] = READING_RESOLUTION[ob["unit"]]
     return obs
 
 
