@@ -187,7 +187,8 @@ def _prefetch(keys: Sequence[str], space, cands, forward, settings, which: Seque
 def diagnose_main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="warpdem diagnose", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("config", help="diagnosis config (YAML), see validation/configs/")
+    ap.add_argument("config", nargs="+", help="diagnosis config(s) (YAML), see validation/configs/; several configs "
+                    "of the same model (e.g. one per measurement set) run in one process and share DEM launches")
     ap.add_argument("--output", help="output folder (default: the config's 'output')")
     ap.add_argument("--device", help="cpu or cuda (default: the config's, else cuda if present)")
     ap.add_argument("--processes", help="CPU worker processes ('auto' = one per core)")
@@ -205,36 +206,57 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     from .diagnose import diagnose
 
     t0 = time.perf_counter()
+    if args.prefetch is not None and len(args.config) > 1:
+        print("warpdem diagnose: --prefetch takes one config", file=sys.stderr)
+        return 2
+    procs = None
+    if args.processes is not None:
+        procs = args.processes if args.processes == "auto" else int(args.processes)
+    jobs = []
     try:
-        cfg, base_dir = load_diagnosis_config(args.config)
-        procs = None
-        if args.processes is not None:
-            procs = args.processes if args.processes == "auto" else int(args.processes)
-        obs, space, cands, forward, settings, out = build_diagnosis(
-            cfg, base_dir, args.device, Path(args.output) if args.output else None, args.add, procs)
+        for path in args.config:
+            cfg, base_dir = load_diagnosis_config(path)
+            output = Path(args.output) if args.output and len(args.config) == 1 else None
+            jobs.append((path, *build_diagnosis(cfg, base_dir, args.device, output, args.add, procs)))
+        forward = jobs[0][4]
+        for job in jobs[1:]:
+            forward.adopt(job[4], where=job[0])
+        outs = [job[6] for job in jobs]
+        if len(set(map(str, outs))) != len(outs):
+            raise ConfigError(f"the configs write to the same output folder: {[str(o) for o in outs]}")
     except (ConfigError, ValueError) as exc:
         print(f"warpdem diagnose: {exc}", file=sys.stderr)
         return 2
     if args.prefetch is not None:
+        _, obs, space, cands, forward, settings, _ = jobs[0]
         keys = [o.key for o in obs if not args.experiments or o.experiment in args.experiments]
         if not keys:
             print(f"warpdem diagnose: --experiments {args.experiments}: no measured observable of these experiments",
                   file=sys.stderr)
             return 2
         return _prefetch(keys, space, cands, forward, settings, args.prefetch)
-    print(f"warpdem diagnose: {len(list(obs))} observables, base parameters {space.names}, candidates "
-          f"{[c.name for c in cands]}; output {out}", file=sys.stderr, flush=True)
-    result = diagnose(obs, space, cands, forward, settings)
-    paths = result.write(out)
-    timing = {"wall_s": round(time.perf_counter() - t0, 1), "dem_s": round(forward.dem_seconds, 1),
-              "dem_worlds_run": forward.dem_worlds, "dem_launches": forward.log,
-              "device": str(forward.device or "default")}
-    (out / "dem_timing.json").write_text(json.dumps(timing, indent=1))
-    print(result.headline)
-    print(f"report: {paths.get('report', out / 'report.html')}  (wall {timing['wall_s']} s, DEM {timing['dem_s']} s, "
-          f"{timing['dem_worlds_run']} worlds run)")
-    return 0
+    from .pooled import PooledForward, run_as_workers
 
+    # one forward model for every config; requests made at the same time (candidates of a ranking
+    # round, the diagnoses of several measurement sets) share DEM launches
+    pool = PooledForward(forward)
+    for path, obs, space, cands, _, settings, out in jobs:
+        print(f"warpdem diagnose: {path}: {len(list(obs))} observables, base parameters {space.names}, candidates "
+              f"{[c.name for c in cands]}; output {out}", file=sys.stderr, flush=True)
+    results = run_as_workers(pool, [(lambda j=j: diagnose(j[1], j[2], j[3], pool, j[5])) for j in jobs])
+    wall = round(time.perf_counter() - t0, 1)
+    for (path, *_, out), result in zip(jobs, results):
+        paths = result.write(out)
+        timing = {"wall_s": wall, "dem_s": round(forward.dem_seconds, 1), "dem_worlds_run": forward.dem_worlds,
+                  "dem_launches": forward.log, "merged_requests": pool.merges,
+                  "diagnoses_in_this_process": [str(j[0]) for j in jobs], "device": str(forward.device or "default")}
+        (out / "dem_timing.json").write_text(json.dumps(timing, indent=1))
+        if len(jobs) > 1:
+            print(f"{path}:")
+        print(result.headline)
+        print(f"report: {paths.get('report', out / 'report.html')}  (wall {timing['wall_s']} s, DEM {timing['dem_s']} s, "
+              f"{timing['dem_worlds_run']} worlds run{' for all configs' if len(jobs) > 1 else ''})")
+    return 0
 
 if __name__ == "__main__":
     sys.exit(diagnose_main())

@@ -150,6 +150,34 @@ class DEMForwardModel(ForwardModel):
     def proposals(self) -> Sequence[ProposedMeasurement]:
         return self._proposals
 
+    def setup(self) -> dict[str, Any]:
+        """What decides a world's result apart from its parameters and fill: the model of every
+        version per experiment, scale, settings, fixed parameters, cache and device. Two forward
+        models with equal setups may share worlds (:meth:`adopt`)."""
+        every = tuple(self.effects)
+        return {"models": {e: self.description(every, e).describe() for e in sorted(EXPERIMENTS)},
+                "effects": sorted(self.effects), "superset": self.superset, "scale": self.scale,
+                "experiment_settings": self.experiment_settings, "fixed": self.fixed,
+                "cache": str(self.cache_path.resolve()) if self.cache_path else None, "device": self.device}
+
+    def adopt(self, other: "DEMForwardModel", where: str = "") -> None:
+        """Serve ``other``'s observables and proposals too (one forward model, one cache, pooled
+        launches for several measurement sets). Refuses a different setup, naming what differs."""
+        mine, theirs = self.setup(), other.setup()
+        differ = [k for k in mine if _fingerprint(mine[k]) != _fingerprint(theirs[k])]
+        if differ:
+            raise ConfigError(f"{where or 'forward model'}: cannot share DEM runs with the first config: "
+                              f"{', '.join(differ)} differ (one process diagnoses several measurement sets only "
+                              "when they simulate the same model the same way)")
+        for key, spec in other.observables.items():
+            known = self.observables.get(key)
+            if known is not None and known != spec:
+                raise ConfigError(f"{where}: observable {key} has other settings than in the first config: "
+                                  f"{spec.settings} vs {known.settings}")
+            self.observables[key] = spec
+        names = {p.key for p in self._proposals}
+        self._proposals += tuple(p for p in other.proposals() if p.key not in names)
+
     def _experiment(self, name: str, settings: Mapping[str, Any], desc: ModelDescription, first_fill: int):
         extra = dict(self.experiment_settings.get(name, {}))
         scale = extra.pop("scale", self.scale)

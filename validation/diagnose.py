@@ -38,6 +38,7 @@ from .effects import CandidateEffect, ModelVersion
 from .forward import ForwardModel, ForwardRunner
 from .history import ErrorHistory, VersionErrors, version_errors
 from .observables import Observable, Observations
+from .pooled import run_as_workers
 from .ranking import CandidateResult, candidate_sentence, effect_signature, rank_candidates
 from .settings import DiagnosisSettings
 from .study import ModelStudy, refine_study, study_model
@@ -209,10 +210,15 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     labels = [o.name for o in obs]
     z_now = _residual(current)
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
+    # the candidates' studies are independent: with a pooled forward model their DEM requests
+    # share launches (validation.pooled); otherwise they run one after another
+    _say(f"studying {len(candidates)} candidate(s): {', '.join(e.name for e in candidates)}")
+    studies = run_as_workers(runner.model, [
+        (lambda i=i, eff=eff: study_model(current.version.with_effect(eff), obs, runner, settings,
+                                          _candidate_seed(seed, i), noise=noise))
+        for i, eff in enumerate(candidates)])
     results = []
-    for i, eff in enumerate(candidates):
-        _say(f"studying candidate '{eff.name}' ({i + 1} of {len(candidates)})")
-        st = study_model(current.version.with_effect(eff), obs, runner, settings, _candidate_seed(seed, i), noise=noise)
+    for eff, st in zip(candidates, studies):
         log_b = st.evidence.log_evidence - current.evidence.log_evidence
         sig = effect_signature(current, st, eff, z_now)
         z_after = np.where(np.isfinite(st.confirmation.z), st.confirmation.z, st.best.z)

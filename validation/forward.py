@@ -10,6 +10,7 @@ DEM objects, only numbers, so it is tested in seconds with an analytic model.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -90,6 +91,7 @@ class ForwardRunner:
         if not hasattr(model, "evaluate") or not callable(model.evaluate):
             raise TypeError(f"forward model must have an evaluate(...) method, got {type(model).__name__}")
         self.model = model
+        self._lock = threading.Lock()  # candidate studies may call from several threads
         self.calls = 0
         self.runs = 0
         self.failed_runs = 0
@@ -104,7 +106,8 @@ class ForwardRunner:
         t0 = time.perf_counter()
         out = np.asarray(self.model.evaluate(tuple(effects), [dict(p) for p in parameter_sets], int(replicates),
                                              tuple(keys)), dtype=float)
-        self.seconds += time.perf_counter() - t0
+        with self._lock:
+            self.seconds += time.perf_counter() - t0
         want = (len(parameter_sets), int(replicates), len(keys))
         if out.shape != want:
             raise ValueError(f"forward model {type(self.model).__name__}.evaluate returned shape {out.shape}, expected "
@@ -112,9 +115,10 @@ class ForwardRunner:
         if np.any(np.isinf(out)):
             raise ValueError(f"forward model {type(self.model).__name__}.evaluate returned infinite values; "
                              "use NaN for a failed run")
-        self.calls += 1
-        self.runs += want[0] * want[1]
-        self.failed_runs += int(np.sum(np.all(np.isnan(out), axis=2)))
+        with self._lock:
+            self.calls += 1
+            self.runs += want[0] * want[1]
+            self.failed_runs += int(np.sum(np.all(np.isnan(out), axis=2)))
         return out
 
     def to_dict(self) -> dict[str, Any]:
