@@ -1,7 +1,8 @@
 """warpdem: discrete element method in NVIDIA Warp (CPU and CUDA), many worlds per launch."""
 from .builder import ModelBuilder, random_quaternions
 from .contact import ContactLaw, ParameterSpec, SubModel, register
-from .errors import ConfigError, ContactOverflowError, OverlapError, StabilityError, WarpDEMError
+from .errors import (ConfigError, ContactOverflowError, OverlapError, StabilityError, StabilityWarning,
+                     WarpDEMError)
 from .materials import GRAVEL, PLEXIGLAS, STEEL, Material
 from .model import Model, State, Wall, WallMotion
 from .solver import DEMSolver, SettleReport, Simulation, WallStats
@@ -13,7 +14,7 @@ __version__ = "0.1.0"
 __all__ = [
     "ModelBuilder", "Model", "State", "Wall", "WallMotion", "DEMSolver", "SettleReport", "Simulation", "WallStats",
     "ContactLaw", "ParameterSpec", "SubModel", "register", "Material", "GRAVEL", "PLEXIGLAS", "STEEL",
-    "ConfigError", "ContactOverflowError", "OverlapError", "StabilityError", "WarpDEMError",
+    "ConfigError", "ContactOverflowError", "OverlapError", "StabilityError", "StabilityWarning", "WarpDEMError",
     "check_time_step", "hertz_contact_time", "hertz_max_overlap", "rayleigh_time", "time_step_limits",
     "random_quaternions", "ShapeFamily", "available_shape_families", "register_shape_family", "shape_family",
 ]

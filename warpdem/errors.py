@@ -10,7 +10,18 @@ class ConfigError(WarpDEMError, ValueError):
 
 
 class StabilityError(WarpDEMError):
-    """The time step exceeds the stability limit, or the state became non-finite."""
+    """The time step exceeds the stability limit, or worlds became unstable.
+
+    ``worlds``: {world index: cause} of the worlds found unstable (NaN/inf state or a speed
+    above the solver's bound) and frozen; empty for a refused time step."""
+
+    def __init__(self, message: str, worlds: dict[int, str] | None = None) -> None:
+        super().__init__(message)
+        self.worlds: dict[int, str] = dict(worlds or {})
+
+
+class StabilityWarning(UserWarning):
+    """A run was accepted outside the checked stability limit (``force=True``)."""
 
 
 class ContactOverflowError(WarpDEMError):

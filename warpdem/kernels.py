@@ -220,10 +220,10 @@ def integrate_bodies(
     v_out: wp.array(dtype=wp.vec3),
     w_out: wp.array(dtype=wp.vec3),
     world_paused: wp.array(dtype=int),
-    bad: wp.array(dtype=int),
 ):
     """Semi-implicit (symplectic) Euler step of rigid bodies. Removed bodies and bodies of a
-    paused world keep their pose at rest.
+    paused world keep their pose at rest (unstable results are caught afterwards by
+    :func:`isolate_unstable_bodies`).
 
     Translation: v' = v + (F/m + g) dt, x' = x + v' dt.
     Rotation (asymmetric bodies): the world angular momentum L = R I R^T w is advanced by the
@@ -272,12 +272,63 @@ def integrate_bodies(
     w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
     r_new = wp.quat(float(r_new64[0]), float(r_new64[1]), float(r_new64[2]), float(r_new64[3]))
     w_new = wp.vec3(float(w_new64[0]), float(w_new64[1]), float(w_new64[2]))
-    if not (wp.isfinite(x) and wp.isfinite(v) and wp.isfinite(w_new)):
-        wp.atomic_add(bad, 0, 1)
     q_out[b] = x
     rot_out[b] = r_new
     v_out[b] = v
     w_out[b] = w_new
+
+
+# Causes of an unstable world (``DEMSolver.world_fail``): the first one seen is kept.
+UNSTABLE_NONFINITE = wp.constant(1)
+UNSTABLE_SPEED = wp.constant(2)
+
+
+@wp.kernel
+def isolate_unstable_bodies(
+    body_world: wp.array(dtype=int),
+    active: wp.array(dtype=int),
+    q_in: wp.array(dtype=wp.vec3),
+    rot_in: wp.array(dtype=wp.quat),
+    q_out: wp.array(dtype=wp.vec3),
+    rot_out: wp.array(dtype=wp.quat),
+    v_out: wp.array(dtype=wp.vec3),
+    w_out: wp.array(dtype=wp.vec3),
+    v_max: float,
+    world_fail: wp.array(dtype=int),
+    world_paused: wp.array(dtype=int),
+):
+    """After integration: a body whose new state is NaN/inf (cause 1) or faster than
+    ``v_max`` [m/s] (cause 2) is put back to its last pose at rest, its world's first cause is
+    recorded in ``world_fail`` and the world is paused, so the bad values never reach another
+    step or another world. Reads no pause flag (the flags it writes act from the next step)."""
+    b = wp.tid()
+    if active[b] == 0:
+        return
+    v = v_out[b]
+    w = w_out[b]
+    r = rot_out[b]
+    code = int(0)
+    if not (wp.isfinite(q_out[b]) and wp.isfinite(v) and wp.isfinite(w)
+            and wp.isfinite(r[0]) and wp.isfinite(r[1]) and wp.isfinite(r[2]) and wp.isfinite(r[3])):
+        code = UNSTABLE_NONFINITE
+    elif wp.dot(v, v) > v_max * v_max:
+        code = UNSTABLE_SPEED
+    if code == 0:
+        return
+    world = body_world[b]
+    wp.atomic_cas(world_fail, world, 0, code)
+    world_paused[world] = 1
+    q_out[b] = q_in[b]
+    rot_out[b] = rot_in[b]
+    v_out[b] = wp.vec3(0.0)
+    w_out[b] = wp.vec3(0.0)
+
+
+@wp.kernel
+def release_worlds(world_fail: wp.array(dtype=int), world_paused: wp.array(dtype=int)):
+    """Unpause every world except those frozen as unstable."""
+    w = wp.tid()
+    world_paused[w] = wp.where(world_fail[w] != 0, 1, 0)
 
 
 @wp.kernel
@@ -311,6 +362,48 @@ def deactivate_outside(
     if x[0] < lower[0] or x[1] < lower[1] or x[2] < lower[2] or x[0] > upper[0] or x[1] > upper[1] or x[2] > upper[2]:
         active[b] = 0
         wp.atomic_add(removed, 0, 1)
+
+
+@wp.kernel
+def wall_overlap(
+    sphere_x: wp.array(dtype=wp.vec3),
+    sphere_radius: wp.array(dtype=float),
+    sphere_world: wp.array(dtype=int),
+    wall_mesh: wp.array(dtype=wp.uint64),
+    world_wall_start: wp.array(dtype=int),
+    world_wall_index: wp.array(dtype=int),
+    wall_lin_vel: wp.array(dtype=wp.vec3),
+    wall_ang_vel: wp.array(dtype=wp.vec3),
+    wall_origin: wp.array(dtype=wp.vec3),
+    wall_t_start: wp.array(dtype=float),
+    wall_t_stop: wp.array(dtype=float),
+    t: wp.float64,
+    depth: wp.array(dtype=float),
+    wall_of: wp.array(dtype=int),
+):
+    """Deepest overlap [m] of each sphere with a wall of its world at time ``t`` [s] (walls
+    placed by their motion, looked up in their rest frame) and that wall's index (-1: none)."""
+    i = wp.tid()
+    xi = sphere_x[i]
+    ri = sphere_radius[i]
+    world = sphere_world[i]
+    best = float(0.0)
+    which = int(-1)
+    for kk in range(world_wall_start[world], world_wall_start[world + 1]):
+        k = world_wall_index[kk]
+        rot = wall_rotation(t, wall_t_start[k], wall_t_stop[k], wall_ang_vel[k])
+        c_rest = wall_origin[k]
+        c_now = wall_centre(t, wall_t_start[k], wall_t_stop[k], c_rest, wall_lin_vel[k])
+        x_rest = c_rest + wp.quat_rotate_inv(rot, xi - c_now)
+        q = wp.mesh_query_point_no_sign(wall_mesh[k], x_rest, ri)
+        if q.result:
+            cp = wp.mesh_eval_position(wall_mesh[k], q.face, q.u, q.v)
+            ov = ri - wp.length(x_rest - cp)
+            if ov > best:
+                best = ov
+                which = k
+    depth[i] = best
+    wall_of[i] = which
 
 
 # ----------------------------------------------------------------------------- neighbours

@@ -6,6 +6,8 @@ kernel launch advances a whole calibration design.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -164,6 +166,7 @@ class Model:
         self.wall_t_start = wp.array([w.motion.start for w in walls] or [0.0], dtype=float, device=d)
         self.wall_t_stop = wp.array([w.motion.stop for w in walls] or [0.0], dtype=float, device=d)
         self._num_wall_slots = n_walls
+        self.fingerprint: str = model_fingerprint(self.host, walls, materials, law, self.max_contacts, self.gravity)
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -202,14 +205,50 @@ class Model:
         return self.host["body_mass"][body] * r3 / vol_sum[body]
 
 
+# host arrays that define a model's bodies and spheres (per-world contact parameters are run
+# settings, not part of the model's identity)
+FINGERPRINT_ARRAYS = ("num_worlds", "sphere_radius", "sphere_body", "sphere_world", "sphere_offset", "sphere_material",
+                      "body_mass", "body_inertia", "body_world", "body_first", "body_count")
+
+
+def model_fingerprint(host: dict, walls: list[Wall], materials: list[Material], law: ContactLaw,
+                      max_contacts: int, gravity) -> str:
+    """16 hex digits of a SHA-256 over what defines a model: the sphere and body arrays
+    (:data:`FINGERPRINT_ARRAYS`, values as float64/int64), each wall's vertices, faces, world,
+    material and motion, the contact law, the materials, ``max_contacts`` and gravity. Not
+    included: per-world contact parameters and body-force models."""
+    h = hashlib.sha256()
+
+    def add(name: str, a) -> None:
+        a = np.asarray(a)
+        a = a.astype(np.float64 if a.dtype.kind == "f" else np.int64)
+        h.update(f"{name}:{a.shape}:".encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+
+    for k in FINGERPRINT_ARRAYS:
+        add(k, host[k])
+    for i, w in enumerate(walls):
+        add(f"wall{i}/vertices", w.vertices)
+        add(f"wall{i}/faces", w.faces)
+        mo = w.motion
+        h.update(json.dumps([w.world, w.material, list(mo.velocity), list(mo.angular_velocity), list(mo.origin),
+                             mo.start, None if math.isinf(mo.stop) else mo.stop]).encode())
+    h.update(json.dumps(dict(law=[law.normal, law.tangential, law.rolling, law.cohesion, law.track_wear],
+                             materials=[[m.name, m.youngs_modulus, m.poisson_ratio, m.density] for m in materials],
+                             max_contacts=int(max_contacts), gravity=[float(g) for g in gravity])).encode())
+    return h.hexdigest()[:16]
+
+
 class State:
     """Time-dependent quantities: body poses and velocities, contact history, time.
 
     Contact history uses ``max_contacts`` slots per sphere: partner (sphere index >= 0, or
     ``-(wall + 1)`` for a wall), tangential spring [m], rolling history, wall normal.
+    ``model_fingerprint``: the :attr:`Model.fingerprint` of the model it belongs to.
     """
 
     def __init__(self, model: Model) -> None:
+        self.model_fingerprint: str = model.fingerprint
         d = model.device
         ini = model.initial
         k = model.max_contacts
@@ -234,7 +273,11 @@ class State:
     def to_numpy(self) -> dict[str, np.ndarray]:
         return {name: getattr(self, name).numpy() for name in self.ARRAYS}
 
-    def load_numpy(self, data: dict[str, np.ndarray]) -> None:
+    def load_numpy(self, data: dict[str, np.ndarray], fingerprint: str | None = None) -> None:
+        """Load arrays saved by :meth:`to_numpy`; ``fingerprint``: the model they came from
+        (refused with a ConfigError if it is not this State's model)."""
+        if fingerprint is not None and fingerprint != self.model_fingerprint:
+            raise ConfigError(f"state was saved from model {fingerprint}, not from this model {self.model_fingerprint}")
         for name in self.ARRAYS:
             arr = getattr(self, name)
             src = np.asarray(data[name])
@@ -243,6 +286,10 @@ class State:
             arr.assign(src)
 
     def assign(self, other: "State") -> None:
+        """Copy ``other`` (a State of the same model) into this State."""
+        if other.model_fingerprint != self.model_fingerprint:
+            raise ConfigError(f"State.assign: the state is of model {other.model_fingerprint}, "
+                              f"this one of model {self.model_fingerprint}")
         for name in self.ARRAYS:
             wp.copy(getattr(self, name), getattr(other, name))
 

@@ -1,16 +1,19 @@
 """DEM solver (``step(state_in, state_out, dt)``) and a thin ``Simulation`` driver."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 import warp as wp
 
 from . import kernels
-from .errors import ConfigError, ContactOverflowError, StabilityError
+from .errors import ConfigError, ContactOverflowError, StabilityError, StabilityWarning
 from .model import Model, State
-from .timestep import TimeStepLimits, check_time_step
+from .timestep import TimeStepLimits, check_time_step, speed_bound
+
+UNSTABLE_MODES = ("raise", "freeze")
 
 
 class WallStats:
@@ -61,13 +64,22 @@ class DEMSolver:
     Each step: place member spheres from body poses (walls move rigidly and are looked up in
     their rest frame, so no wall mesh is moved or refitted); rebuild the grouped hash grid (one group per world); evaluate contacts (one
     thread per sphere, full neighbour list with per-sphere history slots); integrate bodies
-    (semi-implicit Euler); advance time. Nothing is copied to the host inside a step.
+    (semi-implicit Euler); isolate unstable worlds; advance time. Nothing is copied to the
+    host inside a step.
+
+    Unstable worlds: a body whose new state is NaN/inf, or faster than ``v_max``, is put back
+    to its last pose at rest and its world is frozen (paused: bodies held, contacts skipped)
+    with the first cause recorded on the device; other worlds go on unchanged.
+    :meth:`check` raises :class:`StabilityError` naming them; :meth:`failed_worlds` lists them.
 
     Args:
         model: the model.
         dt: time step [s], checked against :func:`~warpdem.timestep.check_time_step`.
         v_ref: largest expected impact speed for the stability check [m/s].
-        force: accept a step above the stability limit.
+        force: accept a step above the stability limit (with a :class:`StabilityWarning`).
+        v_max: speed [m/s] above which a body marks its world unstable (default
+            :func:`~warpdem.timestep.speed_bound`: 10 (v_ref + wall speed) + free-fall speed
+            over the model's extent). Spin is not bounded (only NaN/inf).
         neighbour_skin: Verlet skin [m] (default 0.3 * max radius): the neighbour list holds
             pairs closer than r_i + r_j + skin and is rebuilt (decided on the device, no host
             sync) once any sphere has moved more than skin / 2.
@@ -80,11 +92,17 @@ class DEMSolver:
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  neighbour_skin: float | None = None, max_neighbours: int | None = None,
-                 conditional_rebuild: bool = False) -> None:
+                 conditional_rebuild: bool = False, v_max: float | None = None) -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
         self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
         self.dt = float(dt)
+        self.v_ref = float(v_ref)
+        self.force = bool(force)
+        self._dt_checked = {self.dt}
+        self.v_max = speed_bound(model, v_ref) if v_max is None else float(v_max)
+        if not self.v_max > 0:
+            raise ConfigError(f"v_max must be > 0 m/s, got {v_max}")
         d = model.device
         n = model.num_spheres
         k = model.max_contacts
@@ -94,7 +112,9 @@ class DEMSolver:
         self.slot_depth = wp.zeros(n * k, dtype=float, device=d)
         self.slot_tri = wp.zeros(n * k, dtype=int, device=d)
         self.overflow = wp.zeros(1, dtype=int, device=d)
-        self.bad = wp.zeros(1, dtype=int, device=d)
+        # per world: 0 stable, else the first cause of instability (kernels.UNSTABLE_*)
+        self.world_fail = wp.zeros(max(model.num_worlds, 1), dtype=int, device=d)
+        self._reported_unstable: set[int] = set()
         self.world_paused = wp.zeros(max(model.num_worlds, 1), dtype=int, device=d)
         self.external_force = wp.zeros(model.num_bodies, dtype=wp.vec3, device=d)
         self.use_external_force = False
@@ -137,9 +157,22 @@ class DEMSolver:
 
     # ---------------------------------------------------------------- step
     def step(self, state_in: State, state_out: State, dt: float | None = None) -> None:
-        """Advance ``state_in`` by ``dt`` into ``state_out`` (must be distinct States)."""
+        """Advance ``state_in`` by ``dt`` [s] into ``state_out`` (distinct States of this model).
+
+        A ``dt`` other than the solver's is checked against the same stability limit: above it
+        is a ConfigError (a :class:`StabilityWarning` if the solver was built with ``force``)."""
         m = self.model
-        dt = self.dt if dt is None else float(dt)
+        if dt is None:
+            dt = self.dt
+        else:
+            dt = float(dt)
+            if dt not in self._dt_checked:
+                self._check_step_dt(dt)
+        fp = m.fingerprint
+        if state_in.model_fingerprint != fp or state_out.model_fingerprint != fp:
+            bad = state_in if state_in.model_fingerprint != fp else state_out
+            raise ConfigError(f"step: a State of model {bad.model_fingerprint} was given to the solver of "
+                              f"model {fp}; make States with this model's model.state()")
         d = m.device
         self.place_spheres(state_in)
         wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
@@ -157,8 +190,26 @@ class DEMSolver:
             f_ext, int(use_ext), wp.vec3(*m.gravity), dt,
             state_in.body_active, state_in.body_q, state_in.body_rot, state_in.body_v, state_in.body_w,
             state_out.body_active, state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
-            self.world_paused, self.bad], device=d)
+            self.world_paused], device=d)
+        wp.launch(kernels.isolate_unstable_bodies, dim=m.num_bodies, inputs=[
+            m.body_world, state_out.body_active, state_in.body_q, state_in.body_rot,
+            state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
+            self.v_max, self.world_fail, self.world_paused], device=d)
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
+
+    def _check_step_dt(self, dt: float) -> None:
+        """Refuse (ConfigError) or, with ``force``, warn about a step ``dt`` [s] above the limit."""
+        lim = self.limits.limit
+        if not (dt > 0 and np.isfinite(dt)):
+            raise ConfigError(f"step: dt must be a positive finite number of seconds, got {dt}")
+        if dt > lim:
+            msg = (f"step: dt = {dt:.3g} s exceeds the stability limit {lim:.3g} s this solver was checked for "
+                   f"(v_ref = {self.v_ref} m/s; its dt is {self.dt:.3g} s)")
+            if not self.force:
+                raise ConfigError(msg + "; build the solver with force=True to accept it")
+            warnings.warn(f"{msg}: {dt / lim:.2f} x the limit, accepted because force=True", StabilityWarning,
+                          stacklevel=3)
+        self._dt_checked.add(dt)
 
     def apply_body_forces(self, state_in: State, state_out: State, dt: float) -> wp.array:
         """Per-body force [N] of the body-force models for this step (device only, capturable):
@@ -214,13 +265,22 @@ class DEMSolver:
                   inputs=[m.body_world, self.world_paused, state.body_v, state.body_w], device=m.device)
 
     def resume_worlds(self) -> None:
-        """Release every paused world (it starts again from rest)."""
-        self.world_paused.zero_()
+        """Release every paused world (it starts again from rest); worlds frozen as unstable
+        stay frozen."""
+        wp.launch(kernels.release_worlds, dim=self.world_paused.shape[0], inputs=[self.world_fail, self.world_paused],
+                  device=self.model.device)
 
     @property
     def paused_worlds(self) -> np.ndarray:
-        """Boolean mask of the paused worlds."""
+        """Boolean mask of the paused worlds (those frozen as unstable included)."""
         return self.world_paused.numpy()[: self.model.num_worlds] != 0
+
+    def failed_worlds(self) -> dict[int, str]:
+        """{world: cause} of the worlds frozen as unstable so far (reads the device flags)."""
+        codes = self.world_fail.numpy()[: self.model.num_worlds]
+        causes = {int(kernels.UNSTABLE_NONFINITE): "NaN/inf in a body state",
+                  int(kernels.UNSTABLE_SPEED): f"a body faster than v_max = {self.v_max:.3g} m/s"}
+        return {int(w): causes.get(int(c), f"cause {int(c)}") for w, c in enumerate(codes) if c != 0}
 
     def request_neighbour_rebuild(self) -> None:
         """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
@@ -247,10 +307,28 @@ class DEMSolver:
             ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.world_paused, self.overflow], device=d)
 
     # ---------------------------------------------------------------- checks
-    def check(self) -> None:
-        """Raise if a contact slot overflowed or a state became non-finite since the last check."""
+    def check(self, on_unstable: str = "raise") -> dict[int, str]:
+        """Raise if worlds became unstable or a contact slot overflowed since the last check.
+
+        Unstable worlds (already frozen on the device) come first: ``on_unstable="raise"``
+        raises :class:`StabilityError` (``.worlds``: {world: cause}) when a world failed since
+        the last check; ``"freeze"`` warns (:class:`StabilityWarning`) and goes on. Returns
+        :meth:`failed_worlds`."""
+        if on_unstable not in UNSTABLE_MODES:
+            raise ConfigError(f"on_unstable must be one of {UNSTABLE_MODES}, got {on_unstable!r}")
+        failed = self.failed_worlds()
+        new = sorted(set(failed) - self._reported_unstable)
+        if new:
+            self._reported_unstable.update(new)
+            listing = "; ".join(f"world {w}: {failed[w]}" for w in new)
+            msg = (f"{len(new)} world(s) became unstable and were frozen ({listing}); the other worlds go on. "
+                   f"Time step {self.dt:.3g} s (limit {self.limits.limit:.3g} s for impacts up to "
+                   f"v_ref = {self.v_ref} m/s): a smaller step, a larger v_ref, or a start without huge overlaps "
+                   f"or speeds")
+            if on_unstable == "raise":
+                raise StabilityError(msg, worlds={w: failed[w] for w in new})
+            warnings.warn(msg, StabilityWarning, stacklevel=2)
         ov = int(self.overflow.numpy()[0])
-        bad = int(self.bad.numpy()[0])
         nb_ov, nb_needed = (int(v) for v in self.nb_overflow.numpy())
         if nb_ov:
             self.nb_overflow.zero_()
@@ -264,22 +342,20 @@ class DEMSolver:
                 f"{ov} contact(s) did not fit the {self.model.max_contacts} slots per sphere and would have been "
                 f"dropped; build the model with a larger max_contacts", kind="contacts",
                 capacity=self.model.max_contacts)
-        if bad:
-            self.bad.zero_()
-            raise StabilityError(
-                f"{bad} body state(s) became NaN/inf: the time step {self.dt:.3g} s is too large for these "
-                f"contacts, or the start had a huge overlap (limit {self.limits.limit:.3g} s)")
+        return failed
 
 
 @dataclass(frozen=True)
 class SettleReport:
     """Outcome of :meth:`Simulation.settle`: simulated time spent [s], whether every world met
-    the criterion, kinetic energy per active body per world when it stopped [J], bodies removed."""
+    the criterion, kinetic energy per active body per world when it stopped [J], bodies removed,
+    and the worlds frozen as unstable ({world: cause}; they did not settle)."""
 
     time: float
     settled: bool
     ke_per_particle: np.ndarray
     removed: int
+    failed: dict = field(default_factory=dict)
 
 
 class Simulation:
@@ -291,10 +367,12 @@ class Simulation:
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  use_graph: bool | None = None, steps_per_graph: int = 20, neighbour_skin: float | None = None,
-                 max_neighbours: int | None = None, conditional_rebuild: bool = False) -> None:
+                 max_neighbours: int | None = None, conditional_rebuild: bool = False,
+                 v_max: float | None = None) -> None:
         self.model = model
         self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
-                                max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild)
+                                max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild,
+                                v_max=v_max)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0
@@ -319,9 +397,21 @@ class Simulation:
         """Call after replacing model arrays that a captured graph refers to."""
         self._graph = None
 
+    def failed_worlds(self) -> dict[int, str]:
+        """{world: cause} of the worlds frozen as unstable (see :class:`DEMSolver`)."""
+        return self.solver.failed_worlds()
+
     def run(self, steps: int, check_every: int = 1000, callback: Callable[["Simulation"], None] | None = None,
-            callback_every: int = 0, progress: bool = False) -> None:
-        """Advance ``steps`` steps. ``callback(sim)`` runs every ``callback_every`` steps."""
+            callback_every: int = 0, progress: bool = False, on_unstable: str = "raise") -> dict[int, str]:
+        """Advance ``steps`` steps. ``callback(sim)`` runs every ``callback_every`` steps.
+
+        Every ``check_every`` steps :meth:`DEMSolver.check` looks at the device flags. A world
+        that became unstable is frozen at once on the device; ``on_unstable="raise"`` then
+        raises :class:`StabilityError` naming it, ``"freeze"`` warns and runs the other worlds
+        to the end. Returns the failed worlds ({world: cause}, empty when all are stable)."""
+        if on_unstable not in UNSTABLE_MODES:
+            raise ConfigError(f"on_unstable must be one of {UNSTABLE_MODES}, got {on_unstable!r}")
+        failed: dict[int, str] = {}
         bar = None
         if progress:
             from tqdm import tqdm
@@ -338,11 +428,12 @@ class Simulation:
             if bar is not None:
                 bar.update(n)
             if self.steps % check_every == 0 or done == steps:
-                self.solver.check()
+                failed = self.solver.check(on_unstable)
             if callback_every and self.steps % callback_every == 0 and callback is not None:
                 callback(self)
         if bar is not None:
             bar.close()
+        return failed
 
     def _advance(self, n: int) -> None:
         if not self.use_graph or n < self.steps_per_graph:
@@ -405,7 +496,7 @@ class Simulation:
 
     def settle(self, ke_per_particle: float = 1.0e-6, max_time: float | np.ndarray = 1.5,
                check_interval: float = 0.01, min_time: float | np.ndarray = 0.0,
-               remove_box: tuple | None = None) -> "SettleReport":
+               remove_box: tuple | None = None, on_unstable: str = "raise") -> "SettleReport":
         """Run until the mean kinetic energy per active body of every world is below
         ``ke_per_particle`` [J] after ``min_time``, or ``max_time`` [s] passed (scalars or one
         value per world). Bodies leaving ``remove_box`` = (lower, upper) [m] are removed at each
@@ -413,7 +504,9 @@ class Simulation:
 
         Worlds are independent: a world that meets the criterion (or reaches its ``max_time``)
         is paused at rest (:meth:`pause_worlds`) while the others go on, and all are released at
-        the end, so a world's settled state does not depend on the other worlds of its batch."""
+        the end, so a world's settled state does not depend on the other worlds of its batch.
+        ``on_unstable``: as in :meth:`run`; with ``"freeze"`` a world frozen as unstable stops
+        (it does not count as settled) and is listed in the report's ``failed``."""
         nw = self.model.num_worlds
         max_w = np.broadcast_to(np.asarray(max_time, dtype=float), (nw,))
         min_w = np.broadcast_to(np.asarray(min_time, dtype=float), (nw,))
@@ -426,23 +519,26 @@ class Simulation:
         ke_report = np.zeros(nw)
         paused = np.zeros(nw, dtype=bool)
         met = np.zeros(nw, dtype=bool)
+        failed: dict[int, str] = {}
         try:
             while not paused.all():
                 k = int(min(chunk, n_max[~paused].max() - done))
                 if k > 0:
-                    self.run(k, check_every=k)
+                    failed = self.run(k, check_every=k, on_unstable=on_unstable)
                     done += k
                     if remove_box is not None:
                         removed += self.remove_outside(*remove_box)
+                bad = np.zeros(nw, dtype=bool)
+                bad[list(failed)] = True
                 active = np.bincount(worlds, weights=self.state.body_active.numpy(), minlength=nw)
                 ke = self.kinetic_energy() / np.maximum(active, 1)
                 ke_report[~paused] = ke[~paused]
-                now_met = ~paused & (done * self.dt >= min_w - 1e-12) & (ke < ke_per_particle)
+                now_met = ~paused & ~bad & (done * self.dt >= min_w - 1e-12) & (ke < ke_per_particle)
                 met |= now_met
-                stop = now_met | (~paused & (done >= n_max))
+                stop = now_met | (~paused & ((done >= n_max) | bad))
                 if stop.any():
                     paused |= stop
                     self.pause_worlds(paused)
         finally:
             self.resume_worlds()
-        return SettleReport(done * self.dt, bool(met.all()), ke_report, removed)
+        return SettleReport(done * self.dt, bool(met.all()), ke_report, removed, failed)

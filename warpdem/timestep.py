@@ -8,18 +8,27 @@ Hertz contact duration and maximum overlap of an elastic impact at normal speed 
 
 Stability limit used by the solver: dt must not exceed T_R of the smallest sphere, and an
 impact at the reference speed must be resolved by at least ``MIN_STEPS_PER_CONTACT`` steps.
+
+Speed bound (:func:`speed_bound`): a body faster than
+    v_max = SPEED_BOUND_FACTOR (v_ref + v_wall) + sqrt(2 |g| L)
+is taken as a sign of an unstable world (the step was checked for impacts up to v_ref):
+v_wall is the largest wall surface speed (|v| + |w| max |x0 - c0| over each moving wall's
+vertices), L the diagonal of the box holding every initial body centre and wall vertex (the
+free-fall speed over the model's extent).
 """
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import StabilityError
+from .errors import StabilityError, StabilityWarning
 from .materials import effective_youngs_modulus
 
 MIN_STEPS_PER_CONTACT = 10
+SPEED_BOUND_FACTOR = 10.0
 
 
 def rayleigh_time(radius: float, density: float, shear_modulus: float, poisson_ratio: float) -> float:
@@ -71,9 +80,31 @@ def check_time_step(model, dt: float, v_ref: float = 2.0, force: bool = False) -
     if not (dt > 0 and math.isfinite(dt)):
         raise StabilityError(f"time step must be a positive finite number of seconds, got {dt}")
     lim = time_step_limits(model, v_ref)
+    if dt > lim.limit and force:
+        warnings.warn(
+            f"time step {dt:.3g} s is {dt / lim.limit:.2f} x the stability limit {lim.limit:.3g} s "
+            f"(impacts up to v_ref = {v_ref} m/s); accepted because force=True", StabilityWarning, stacklevel=2)
     if dt > lim.limit and not force:
         raise StabilityError(
             f"time step {dt:.3g} s exceeds the stability limit {lim.limit:.3g} s "
             f"(Rayleigh time {lim.rayleigh:.3g} s, Hertz contact time {lim.hertz_contact:.3g} s at {v_ref} m/s "
             f"needs >= {MIN_STEPS_PER_CONTACT} steps); recommended {lim.recommended:.3g} s. Pass force=True to override.")
     return lim
+
+
+def speed_bound(model, v_ref: float = 2.0) -> float:
+    """Largest body speed [m/s] a stable run of ``model`` is expected to reach (module
+    docstring): ``SPEED_BOUND_FACTOR (v_ref + v_wall) + sqrt(2 |g| L)``."""
+    pts = [np.asarray(model.initial["body_q"], dtype=np.float64).reshape(-1, 3)]
+    v_wall = 0.0
+    for w in model.walls:
+        x0 = np.asarray(w.vertices, dtype=np.float64)
+        pts.append(x0)
+        mo = w.motion
+        if not mo.is_static:
+            arm = float(np.linalg.norm(x0 - np.asarray(mo.origin), axis=1).max())
+            v_wall = max(v_wall, float(np.linalg.norm(mo.velocity)) + float(np.linalg.norm(mo.angular_velocity)) * arm)
+    allp = np.concatenate(pts)
+    extent = float(np.linalg.norm(allp.max(axis=0) - allp.min(axis=0)))
+    g = float(np.linalg.norm(model.gravity))
+    return SPEED_BOUND_FACTOR * (float(v_ref) + v_wall) + math.sqrt(2.0 * g * extent)
