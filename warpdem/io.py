@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 import os
 import re
+import zipfile
+import zlib
 from pathlib import Path
 from xml.sax.saxutils import escape as xml_escape
 
@@ -156,11 +158,12 @@ class VtkSeries:
 
 # ----------------------------------------------------------------------------- checkpoints
 def save_checkpoint(path: str | os.PathLike, sim) -> Path:
-    """Save model, state, wall accumulators and step count to one ``.npz`` file."""
+    """Save model, state, wall accumulators and step count to one ``.npz`` file, with the
+    model's fingerprint (:attr:`Model.fingerprint`) and the solver's ``v_ref`` and ``force``."""
     m: Model = sim.model
     law = m.contact_law
     meta = dict(
-        version=1, law=dict(normal=law.normal, tangential=law.tangential, rolling=law.rolling, cohesion=law.cohesion,
+        version=2, fingerprint=m.fingerprint, v_ref=sim.solver.v_ref, force=sim.solver.force, law=dict(normal=law.normal, tangential=law.tangential, rolling=law.rolling, cohesion=law.cohesion,
                             track_wear=law.track_wear),
         materials=[dict(name=x.name, youngs_modulus=x.youngs_modulus, poisson_ratio=x.poisson_ratio, density=x.density)
                    for x in m.materials],
@@ -187,19 +190,57 @@ def save_checkpoint(path: str | os.PathLike, sim) -> Path:
     return path if path.suffix == ".npz" else path.with_suffix(path.suffix + ".npz")
 
 
-def load_checkpoint(path: str | os.PathLike, device: str | None = None, **sim_kwargs):
+def load_checkpoint(path: str | os.PathLike, device: str | None = None, model: Model | None = None, **sim_kwargs):
     """Rebuild the Simulation saved by :func:`save_checkpoint`; continuing it gives the same
-    results as the uninterrupted run."""
-    from .solver import Simulation
+    results as the uninterrupted run.
 
+    ``model``: continue on this model instead of the one rebuilt from the file (e.g. one with
+    body forces, which a checkpoint does not hold; its own contact parameters are used); it
+    must have the checkpoint's fingerprint. Raises ConfigError naming the file for a missing,
+    damaged or incomplete file, and naming both fingerprints for a checkpoint of another model."""
     path = Path(path)
     if not path.exists():
         raise ConfigError(f"checkpoint file not found: {path}")
-    data = np.load(path, allow_pickle=False)
     try:
-        meta = json.loads(str(data["meta"]))
-    except KeyError as exc:
-        raise ConfigError(f"{path} is not a warpdem checkpoint (no 'meta' entry)") from exc
+        with np.load(path, allow_pickle=False) as data:
+            if "meta" not in data.files:
+                raise ConfigError(f"{path} is not a warpdem checkpoint (no 'meta' entry)")
+            return _load_checkpoint(path, data, device, model, sim_kwargs)
+    except ConfigError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, KeyError, EOFError, OSError, ValueError, TypeError) as exc:
+        raise ConfigError(f"checkpoint {path} is damaged or incomplete ({type(exc).__name__}: {exc})") from exc
+
+
+def _load_checkpoint(path: Path, data, device: str | None, model: Model | None, sim_kwargs: dict):
+    from .solver import Simulation
+
+    meta = json.loads(str(data["meta"]))
+    saved_fp = meta.get("fingerprint")
+    if model is not None:
+        if saved_fp is not None and saved_fp != model.fingerprint:
+            raise ConfigError(f"checkpoint {path} was saved from model {saved_fp}, not from the given model "
+                              f"{model.fingerprint}")
+    else:
+        model = _model_from_checkpoint(path, data, meta, device)
+    kwargs = dict(v_ref=meta.get("v_ref", 2.0), force=meta.get("force", True))
+    kwargs.update(sim_kwargs)
+    sim = Simulation(model, meta["dt"], **kwargs)
+    state = {k[6:]: data[k] for k in data.files if k.startswith("state/")}
+    missing = [n for n in sim.state.ARRAYS if n not in state]
+    if missing:
+        raise ConfigError(f"checkpoint {path} is incomplete: state arrays {missing} are missing")
+    fp = saved_fp if saved_fp is not None else model.fingerprint
+    sim.state.load_numpy(state, fingerprint=fp)
+    sim._next.load_numpy(state, fingerprint=fp)
+    for f in sim.solver.wall_stats.FIELDS:
+        getattr(sim.solver.wall_stats, f).assign(data[f"wear/{f}"])
+    sim.steps = int(meta["steps"])
+    return sim
+
+
+def _model_from_checkpoint(path: Path, data, meta: dict, device: str | None) -> Model:
+    """The Model stored in a checkpoint; its fingerprint must match the stored one."""
     host = {k[5:]: data[k] for k in data.files if k.startswith("host/")}
     initial = {k[8:]: data[k] for k in data.files if k.startswith("initial/")}
     materials = [Material(**x) for x in meta["materials"]]
@@ -214,11 +255,8 @@ def load_checkpoint(path: str | os.PathLike, device: str | None = None, **sim_kw
                           triangle_labels=labels, label_names=tuple(w["label_names"])))
     model = Model(host, walls, materials, ContactLaw(**meta["law"]), initial, device=device,
                   max_contacts=meta["max_contacts"], gravity=meta["gravity"])
-    sim = Simulation(model, meta["dt"], force=True, **sim_kwargs)
-    state = {k[6:]: data[k] for k in data.files if k.startswith("state/")}
-    sim.state.load_numpy(state)
-    sim._next.load_numpy(state)
-    for f in sim.solver.wall_stats.FIELDS:
-        getattr(sim.solver.wall_stats, f).assign(data[f"wear/{f}"])
-    sim.steps = int(meta["steps"])
-    return sim
+    saved = meta.get("fingerprint")
+    if saved is not None and saved != model.fingerprint:
+        raise ConfigError(f"checkpoint {path} records model {saved} but its arrays make model {model.fingerprint}: "
+                          f"the file is damaged or inconsistent")
+    return model
