@@ -242,7 +242,8 @@ def test_rotating_drum_carries_particles_up():
     pos = []
     while len(pos) < 30:
         p = np.array([rng.uniform(-0.05, 0.05), rng.uniform(0.012, 0.048), rng.uniform(-0.07, -0.03)])
-        if all(np.linalg.norm(p - q) > 2.05 * R for q in pos):
+        inside = np.hypot(p[0], p[2]) < 0.09 - 1.05 * R  # clear of the drum (finalize refuses wall overlaps)
+        if inside and all(np.linalg.norm(p - q) > 2.05 * R for q in pos):
             pos.append(p)
     b.add_spheres(np.array(pos), R, "gravel")
     drum = geometry.cylinder_shell(0.09, 0.06, axis=(0, 1, 0), center=(0, 0.03, 0), sections=48)
