@@ -214,10 +214,11 @@ class RunContext:
             return contextlib.nullcontext()
         sim, plain_run = self.sim, self.sim.run
 
-        def run(steps, check_every=1000, callback=None, callback_every=0, progress=False):
+        def run(steps, check_every=1000, callback=None, callback_every=0, progress=False, **kwargs):
+            # kwargs: Simulation.run's further options (e.g. on_unstable), passed on untouched
             if callback is not None:
-                return plain_run(steps, check_every, callback, callback_every, progress)
-            return plain_run(steps, check_every, self.vtk.write, self.vtk_steps, progress)
+                return plain_run(steps, check_every, callback, callback_every, progress, **kwargs)
+            return plain_run(steps, check_every, self.vtk.write, self.vtk_steps, progress, **kwargs)
 
         @contextlib.contextmanager
         def recording():
