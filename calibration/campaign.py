@@ -12,6 +12,8 @@ Data flows one way and every stage writes what it produced into the output folde
                             indices, confirmation and validation runs with relative errors
 ``*.png``                   predicted vs simulated, acceptable set, sensitivity
 ``summary.md``              a short human-readable account
+``vtk/``                    on request (config section ``vtk``): ParaView ``.pvd`` series of
+                            chosen design samples, targets, confirmation and validation runs
 ==========================  ===================================================================
 
 The configuration (YAML/JSON) is documented in ``calibration/configs/quick_calibration.yaml``.
@@ -29,6 +31,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import warp as wp
 import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 import warpdem as wd
 from warpdem import ConfigError
@@ -40,7 +43,7 @@ from .measurement.records import load_measurements
 from .model_description import ModelDescription
 
 TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "material", "plugins", "parameters", "fixed", "design", "batch_worlds",
-            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills"}
+            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills", "vtk"}
 FILL_MODES = ("independent", "shared")
 # first loose-fill index of each kind of DEM run when fills are independent: design sample i uses
 # fills i*replicates ..., so the target, the confirmation rounds and the validation never reuse a
@@ -50,6 +53,39 @@ RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target", "replicate
 
 
 # ----------------------------------------------------------------------------- configuration
+class VtkOutput(BaseModel):
+    """Config section ``vtk``: which DEM runs of a campaign write a ParaView time series
+    (``particles.pvd`` and ``wall_<name>.pvd`` with the experiment's VTK fields).
+
+    every: simulated time between frames [s]. samples: design sample indices to record (default
+    none). replicate: which of a sample's loose fills (world) to record, when a response runs
+    ``replicates`` > 1. targets / confirmation / validation: also record the first DEM run of each
+    response's DEM target, of each confirmation round, of the validation. folder: under the
+    campaign's output folder (or absolute); one sub-folder per run, e.g. ``sample_003/<response>``.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+    every: float = Field(gt=0, allow_inf_nan=False)
+    samples: list[int] = Field(default_factory=list)
+    replicate: int = Field(0, ge=0)
+    targets: bool = False
+    confirmation: bool = False
+    validation: bool = False
+    folder: str = Field("vtk", min_length=1)
+
+    @field_validator("samples")
+    @classmethod
+    def _inside_design(cls, v: list[int], info: ValidationInfo) -> list[int]:
+        n = (info.context or {}).get("design_samples")
+        bad = [i for i in v if i < 0 or (n is not None and i >= n)]
+        if bad:
+            raise ValueError(f"sample index(es) {bad} outside the design" +
+                             (f" (design.samples = {n}: indices 0-{n - 1})" if n is not None else " (indices start at 0)"))
+        if len(set(v)) != len(v):
+            raise ValueError(f"sample index(es) listed twice: {sorted({i for i in v if v.count(i) > 1})}")
+        return sorted(v)
+
+
 @dataclass
 class Response:
     """A measured response: an experiment, its settings, and the target it must match [deg]."""
@@ -86,14 +122,15 @@ class CampaignConfig:
     refine_rounds: int = 0
     surrogate: dict[str, Any] = field(default_factory=dict)
     sobol_n: int = 2**12
+    vtk: VtkOutput | None = None  # ParaView series of chosen runs (config section ``vtk``)
     base_dir: Path = Path(".")
 
 
-def _check_sections(raw: Mapping[str, Any], source: str) -> None:
-    """Sub-keys and values of the optimisation, confirmation, sensitivity, surrogate and design
-    sections (pydantic): an unknown key such as ``confirmation: {run: 5}`` is an error, not a silent
-    default. Every problem is listed with its path."""
-    from pydantic import BaseModel, ConfigDict, Field, ValidationError
+def _check_sections(raw: Mapping[str, Any], source: str) -> VtkOutput | None:
+    """Sub-keys and values of the optimisation, confirmation, sensitivity, surrogate, design and
+    vtk sections (pydantic): an unknown key such as ``confirmation: {run: 5}`` is an error, not a
+    silent default. Every problem is listed with its path. Returns the parsed ``vtk`` section."""
+    from pydantic import ValidationError
 
     class _S(BaseModel):
         model_config = ConfigDict(extra="forbid")
@@ -128,20 +165,26 @@ def _check_sections(raw: Mapping[str, Any], source: str) -> None:
         sensitivity: Sensitivity = Field(default_factory=Sensitivity)
         surrogate: Surrogate = Field(default_factory=Surrogate)
         design: Design = Field(default_factory=Design)
+        vtk: VtkOutput | None = None
 
     present = {k: (raw.get(k) or {}) for k in ("optimisation", "confirmation", "sensitivity", "surrogate", "design")}
+    if raw.get("vtk") is not None:
+        present["vtk"] = raw["vtk"]
+    n_design = (raw.get("design") or {}).get("samples", 24) if isinstance(raw.get("design") or {}, Mapping) else None
     try:
-        Sections.model_validate(present)
+        sections = Sections.model_validate(
+            present, context={"design_samples": n_design if isinstance(n_design, int) else None})
     except ValidationError as exc:
         lines = []
         for e in exc.errors():
             path = ".".join(str(p) for p in e["loc"])
-            msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"]
+            msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"].removeprefix("Value error, ")
             lines.append(f"  {path}: {msg} (got {e.get('input')!r})")
         raise ConfigError(f"{source}: {len(lines)} problem(s) in the config:\n" + "\n".join(lines)) from None
     tol = (raw.get("optimisation") or {}).get("tolerance_deg")
     if tol is not None and any(float(t) <= 0 for t in np.atleast_1d(tol)):
         raise ConfigError(f"{source}: optimisation.tolerance_deg must be > 0 deg, got {tol!r}")
+    return sections.vtk
 
 
 def _response(d: Any, where: str) -> Response:
@@ -156,6 +199,10 @@ def _response(d: Any, where: str) -> Response:
     rep = int(d.get("replicates", 1))
     if rep < 1:
         raise ConfigError(f"{where}: replicates must be >= 1, got {rep}")
+    vtk_keys = sorted(k for k in (d.get("settings") or {}) if str(k).startswith("vtk_"))
+    if vtk_keys:
+        raise ConfigError(f"{where}: settings {vtk_keys}: a campaign asks for VTK output in its top-level "
+                          "'vtk' section (vtk: {every: 0.05, samples: [0]}), which gives every run its own folder")
     return Response(name=str(d["name"]), experiment=str(d["experiment"]), scale=str(d.get("scale", "quick")),
                     settings=dict(d.get("settings") or {}), target=d.get("target"), replicates=rep)
 
@@ -182,7 +229,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
     for k in ("parameters", "responses"):
         if k not in raw:
             raise ConfigError(f"{source}: missing '{k}'")
-    _check_sections(raw, source)
+    vtk = _check_sections(raw, source)
     model = ModelDescription.from_config(raw, base_dir=base_dir, where=source)
     params = raw["parameters"]
     if not isinstance(params, Mapping) or not params:
@@ -216,7 +263,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
         refine_rounds=int((raw.get("confirmation") or {}).get("refine_rounds", 0)),
         surrogate=dict(raw.get("surrogate") or {}), sobol_n=int((raw.get("sensitivity") or {}).get("n", 2**12)),
-        base_dir=base_dir)
+        vtk=vtk, base_dir=base_dir)
     if not cfg.responses:
         raise ConfigError(f"{source}: 'responses' is empty")
     for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
@@ -228,6 +275,11 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
     if not 0 <= cfg.held_out < cfg.samples - len(plist):
         raise ConfigError(f"{source}: design.held_out ({cfg.held_out}) must leave more training samples than "
                           f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
+    if vtk is not None:
+        for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
+            if vtk.replicate >= resp.replicates:
+                raise ConfigError(f"{source}: vtk.replicate: {vtk.replicate} but response '{resp.name}' runs "
+                                  f"{resp.replicates} fill(s) per sample (replicate indices 0-{resp.replicates - 1})")
     if cfg.batch_worlds < 1:
         raise ConfigError(f"{source}: batch_worlds must be >= 1")
     if cfg.fills not in FILL_MODES:
@@ -241,7 +293,8 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
 
 # ----------------------------------------------------------------------------- DEM runs
 def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: CampaignConfig,
-                 progress: bool = False, first_fill: int = 0) -> list[dict[str, Any]]:
+                 progress: bool = False, first_fill: int = 0,
+                 vtk_folder: str | os.PathLike | None = None) -> list[dict[str, Any]]:
     """Run one experiment with one world per (parameter set, replicate); returns one record per
     parameter set with the replicate mean (``angle_deg``), the replicate angles and their spread.
 
@@ -251,9 +304,16 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
     whole batch (replicates still get a fill each, numbered from 0), a common-random-numbers
     design: the surrogate sees a smoother response, biased by that one fill. At small particle
     counts the angle is a rough function of the parameters, and the fill-to-fill spread is the
-    noise floor any calibration against this experiment can reach."""
+    noise floor any calibration against this experiment can reach.
+
+    ``vtk_folder``: write a ParaView series of world ``cfg.vtk.replicate`` (every ``cfg.vtk.every``
+    simulated seconds) into this folder; the experiment then runs in one process."""
     r = resp.replicates
     settings = dict(resp.settings)
+    if vtk_folder is not None:
+        if cfg.vtk is None:
+            raise ValueError("run_response: vtk_folder given but the config has no 'vtk' section")
+        settings.update(vtk_every=cfg.vtk.every, vtk_world=cfg.vtk.replicate, vtk_folder=str(vtk_folder))
     if cfg.fills == "independent":
         settings["fill_per_world"] = True
         settings["first_fill_index"] = int(first_fill)
@@ -284,8 +344,36 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
     return out
 
 
-def resolve_target(resp: Response, cfg: CampaignConfig, log) -> None:
-    """Fill ``resp.target_deg`` from a number, a measurement file, or a DEM run at known parameters."""
+def run_recorded(resp: Response, parameter_sets: list[dict[str, float]], cfg: CampaignConfig,
+                 first_fill: int = 0, record: Mapping[int, Path] | None = None,
+                 progress: bool = False) -> list[dict[str, Any]]:
+    """:func:`run_response`, except that each parameter set at a position in ``record`` runs as a
+    batch of its own writing its VTK series into ``record[position]``; the other sets run in
+    contiguous batches as before. Every set keeps its loose fills (with independent fills, the set
+    at position k uses fills ``first_fill + k * replicates ...`` however the batch is split).
+    Records of recorded sets carry ``vtk``: the series' folder."""
+    record = {k: v for k, v in (record or {}).items() if 0 <= k < len(parameter_sets)}
+    if not record:
+        return run_response(resp, parameter_sets, cfg, progress=progress, first_fill=first_fill)
+    r = resp.replicates
+    out: list[dict[str, Any]] = []
+    k = 0
+    while k < len(parameter_sets):
+        if k in record:
+            recs = run_response(resp, parameter_sets[k:k + 1], cfg, progress=progress, first_fill=first_fill + k * r,
+                                vtk_folder=record[k])
+            out += [dict(rec, vtk=str(record[k])) for rec in recs]
+            k += 1
+            continue
+        end = next((j for j in range(k, len(parameter_sets)) if j in record), len(parameter_sets))
+        out += run_response(resp, parameter_sets[k:end], cfg, progress=progress, first_fill=first_fill + k * r)
+        k = end
+    return out
+
+
+def resolve_target(resp: Response, cfg: CampaignConfig, log, vtk_folder: Path | None = None) -> None:
+    """Fill ``resp.target_deg`` from a number, a measurement file, or a DEM run at known parameters
+    (``vtk_folder``: the first of those runs writes its VTK series there)."""
     t = resp.target
     if t is None:
         raise ConfigError(f"response '{resp.name}': no target given")
@@ -314,7 +402,8 @@ def resolve_target(resp: Response, cfg: CampaignConfig, log) -> None:
         if runs < 1:
             raise ConfigError(f"response '{resp.name}': target runs must be >= 1, got {runs}")
         log(f"target '{resp.name}': DEM at known parameters {truth}, {runs} run(s) x {resp.replicates} fill(s)")
-        recs = run_response(resp, [truth] * runs, cfg, first_fill=TARGET_FILLS)
+        recs = run_recorded(resp, [truth] * runs, cfg, first_fill=TARGET_FILLS,
+                            record={0: vtk_folder} if vtk_folder is not None else None)
         angles = [a for rec in recs if rec["status"] == "ok" for a in rec["replicate_angles_deg"]]
         if len(angles) < runs * resp.replicates:
             errs = "; ".join(str(rec["error"]) for rec in recs if rec["error"])
@@ -350,6 +439,12 @@ class Campaign:
         self.verbose = verbose
         self.samples_path = self.out / "samples.jsonl"
         self.refine_rounds = cfg.refine_rounds
+
+    def vtk_folder(self, kind: str, response: str) -> Path:
+        """Folder of one run's VTK series: ``<output>/<vtk.folder>/<kind>/<response>`` (kind e.g.
+        ``sample_003``, ``target``, ``confirmation_round0``, ``validation``)."""
+        assert self.cfg.vtk is not None
+        return self.out / self.cfg.vtk.folder / kind / response
 
     def log(self, msg: str) -> None:
         if self.verbose:
@@ -429,6 +524,11 @@ class Campaign:
                 todo = todo[:max_samples]
             if not todo:
                 continue
+            wanted = set(self.cfg.vtk.samples) if self.cfg.vtk is not None else set()
+            skipped = sorted(wanted - set(todo))
+            if skipped:
+                self.log(f"{resp.name}: sample(s) {skipped} are in {self.samples_path.name} already and are not "
+                         "run again, so they write no VTK (use a new output folder to record them)")
             self.log(f"{resp.name}: {len(todo)} of {len(X)} samples to run ({resp.experiment}, scale {resp.scale})")
             bar = None
             if progress:
@@ -438,10 +538,13 @@ class Campaign:
             for batch in _fill_contiguous_batches(todo, self.cfg.batch_worlds):
                 sets = [dict(zip(names, map(float, X[i]))) for i in batch]
                 # world k of the batch uses fill (batch[0] + k) * replicates + j: sample i's own fills
-                records = run_response(resp, sets, self.cfg, first_fill=batch[0] * resp.replicates)
+                record = {k: self.vtk_folder(f"sample_{i:03d}", resp.name) for k, i in enumerate(batch) if i in wanted}
+                records = run_recorded(resp, sets, self.cfg, first_fill=batch[0] * resp.replicates, record=record)
                 with open(self.samples_path, "a") as fh:
                     for i, p, rec in zip(batch, sets, records):
                         rec = dict(index=i, response=resp.name, parameters=p, **rec)
+                        if rec.get("vtk"):  # the series' folder, relative to the output folder
+                            rec["vtk"] = os.path.relpath(rec["vtk"], self.out)
                         fh.write(json.dumps(rec) + "\n")
                         done[(i, resp.name)] = rec
                 if bar is not None:
@@ -464,7 +567,8 @@ class Campaign:
                                    model=cfg.model.describe(), contact_law=cfg.model.contact_law.describe(),
                                    device=str(cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")))
         for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
-            resolve_target(resp, cfg, self.log)
+            resolve_target(resp, cfg, self.log, vtk_folder=self.vtk_folder("target", resp.name)
+                           if cfg.vtk is not None and cfg.vtk.targets else None)
             self.log(f"target {resp.name} = {resp.target_deg:.3f} deg ({resp.target_source})")
         res["targets"] = {r.name: dict(deg=r.target_deg, std_deg=r.target_std_deg, source=r.target_source)
                           for r in cfg.responses + ([cfg.validation] if cfg.validation else [])}
@@ -515,8 +619,10 @@ class Campaign:
             x_best = dict(zip(pnames, map(float, cal.compromise_x)))
             conf = {}
             for resp in cfg.responses:
-                recs = run_response(resp, [x_best] * cfg.confirmation_runs, cfg,
-                                    first_fill=CONFIRMATION_FILLS + 10_000 * rnd)
+                recs = run_recorded(resp, [x_best] * cfg.confirmation_runs, cfg,
+                                    first_fill=CONFIRMATION_FILLS + 10_000 * rnd,
+                                    record={0: self.vtk_folder(f"confirmation_round{rnd}", resp.name)}
+                                    if cfg.vtk is not None and cfg.vtk.confirmation else None)
                 angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
                 dem = float(np.mean(angles)) if angles else None
                 conf[resp.name] = dict(
@@ -550,7 +656,9 @@ class Campaign:
         plot_sensitivity(sob, path=str(self.out / "sensitivity.png"))
         if cfg.validation is not None:
             v = cfg.validation
-            recs = run_response(v, [rounds[-1]["parameters"]], cfg, first_fill=VALIDATION_FILLS)
+            recs = run_recorded(v, [rounds[-1]["parameters"]], cfg, first_fill=VALIDATION_FILLS,
+                                record={0: self.vtk_folder("validation", v.name)}
+                                if cfg.vtk is not None and cfg.vtk.validation else None)
             angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
             dem = float(np.mean(angles)) if angles else None
             res["validation"] = dict(experiment=v.experiment, scale=v.scale, dem_deg=dem, measured_deg=v.target_deg,
@@ -558,6 +666,10 @@ class Campaign:
                                      relative_error_pct=None if dem is None else abs(dem - v.target_deg) / v.target_deg * 100,
                                      failed=[r["error"] for r in recs if r["status"] != "ok"])
             self.log(f"validation {v.name}: DEM {dem} deg vs measured {v.target_deg:.3f} deg")
+        if cfg.vtk is not None:  # every series written by this campaign (any session), relative to output
+            root = self.out / cfg.vtk.folder
+            res["vtk_series"] = sorted(str(p.parent.relative_to(self.out)) if p.is_relative_to(self.out) else str(p.parent)
+                                       for p in root.glob("*/*/particles.pvd"))
         res["wall_s"] = round(time.perf_counter() - t_start, 1)
         (self.out / "results.json").write_text(json.dumps(_jsonable(res), indent=1))
         (self.out / "summary.md").write_text(summary_markdown(res))
@@ -618,6 +730,9 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
         rel = "-" if v["relative_error_pct"] is None else f"{v['relative_error_pct']:.2f} %"
         lines += ["", "## Validation", "", f"- {v['experiment']} ({v['scale']} scale): DEM {dem} vs measured "
                   f"{v['measured_deg']:.2f} deg, relative error {rel}"]
+    if res.get("vtk_series"):
+        lines += ["", "## VTK series (open the .pvd files in ParaView)", ""]
+        lines += [f"- `{f}/particles.pvd` (and `wall_*.pvd`)" for f in res["vtk_series"]]
     lines += ["", f"Total wall time {res['wall_s']} s.", ""]
     return "\n".join(lines)
 

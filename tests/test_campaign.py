@@ -288,3 +288,110 @@ def test_section_subkeys_and_values_checked_at_load():
         assert what in msg, msg
     with pytest.raises(ConfigError, match="tolerance_deg must be > 0"):
         cp.parse_config({**BASE, "optimisation": {**BASE["optimisation"], "tolerance_deg": -1.0}})
+
+
+# ----------------------------------------------------------------------------- VTK on request (issue 13)
+def test_vtk_section_bad_inputs_name_the_key():
+    """Each bad ``vtk`` section is refused at load with its key named."""
+    cases = [({"every": -0.05}, "vtk.every: Input should be greater than 0"),
+             ({"every": 0.05, "samples": [0, 16]}, "vtk.samples: sample index(es) [16] outside the design "
+                                                   "(design.samples = 16: indices 0-15)"),
+             ({"every": 0.05, "samples": [-1]}, "vtk.samples: sample index(es) [-1] outside the design"),
+             ({"every": 0.05, "sample": [1]}, "vtk.sample: unknown key"),
+             ({"samples": [1]}, "vtk.every: Field required"),
+             ({"every": 0.05, "replicate": 1}, "vtk.replicate: 1 but response 'alpha' runs 1 fill(s)"),
+             ({"every": 0.05, "samples": [2, 2]}, "vtk.samples: sample index(es) listed twice: [2]")]
+    for section, message in cases:
+        with pytest.raises(ConfigError) as exc:
+            cp.parse_config({**BASE, "vtk": section})
+        assert message in str(exc.value), (section, str(exc.value))
+    resp = {**BASE["responses"][0], "settings": {"vtk_every": 0.1}}
+    with pytest.raises(ConfigError, match=r"responses\[0\]: settings \['vtk_every'\].*top-level 'vtk' section"):
+        cp.parse_config({**BASE, "responses": [resp, BASE["responses"][1]]})
+    ok = cp.parse_config({**BASE, "vtk": {"every": 0.05, "samples": [15, 0]}})
+    assert ok.vtk.samples == [0, 15] and ok.vtk.folder == "vtk" and not ok.vtk.targets
+    assert cp.parse_config(BASE).vtk is None
+
+
+def test_vtk_section_error_exits_2_without_traceback(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**BASE, "vtk": {"every": 0.05, "samples": [99]}}))
+    assert cp.calibrate_main([str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "vtk.samples" in err and "[99] outside the design" in err and "Traceback" not in err
+
+
+def test_vtk_runs_chosen_samples_alone_with_their_own_fills(tmp_path, monkeypatch):
+    """A recorded sample runs as a batch of its own into its folder and keeps its loose fills; the
+    target, confirmation and validation record their first run when asked (DEM replaced)."""
+    calls = []
+
+    def run_response(resp, parameter_sets, cfg, progress=False, first_fill=0, vtk_folder=None):
+        calls.append((resp.name, first_fill, len(parameter_sets), vtk_folder))
+        a = [fake_angle(resp.experiment, p) for p in parameter_sets]
+        return [dict(status="ok", error=None, angle_deg=x, replicate_angles_deg=[x] * resp.replicates) for x in a]
+
+    monkeypatch.setattr(cp, "run_response", run_response)
+    raw = {**BASE, "responses": [{**r, "replicates": 2} for r in BASE["responses"]],
+           "validation": {"name": "gamma", "experiment": "cylinder", "target": 30.0},
+           "confirmation": {"runs": 3, "refine_rounds": 0},
+           "vtk": {"every": 0.05, "samples": [3, 5], "replicate": 1, "targets": True, "confirmation": True,
+                   "validation": True, "folder": "series"}}
+    with pytest.raises(ConfigError, match="vtk.replicate: 1 but response 'gamma' runs 1 fill"):
+        cp.parse_config(raw)
+    raw["validation"]["replicates"] = 2
+    res = cp.Campaign(cp.parse_config(raw), tmp_path, verbose=False).run(progress=False)
+    alpha = [c for c in calls if c[0] == "alpha"]
+    # target: 1 run recorded alone, then the other (default 1) runs: none left
+    assert alpha[0] == ("alpha", cp.TARGET_FILLS, 1, tmp_path / "series" / "target" / "alpha")
+    design = [c for c in alpha if cp.TARGET_FILLS > c[1]]
+    # batches of 5 samples (batch_worlds): [0..4] -> [0-2], [3] recorded, [4]; [5..9] -> [5] recorded, [6-9]
+    assert design[:5] == [("alpha", 0, 3, None), ("alpha", 6, 1, tmp_path / "series" / "sample_003" / "alpha"),
+                          ("alpha", 8, 1, None), ("alpha", 10, 1, tmp_path / "series" / "sample_005" / "alpha"),
+                          ("alpha", 12, 4, None)]
+    fills = [f for c in design for f in range(c[1], c[1] + 2 * c[2])]
+    assert fills == list(range(2 * 16))  # every sample keeps its own two fills
+    conf = [c for c in alpha if c[1] >= cp.CONFIRMATION_FILLS]
+    assert conf == [("alpha", cp.CONFIRMATION_FILLS, 1, tmp_path / "series" / "confirmation_round0" / "alpha"),
+                    ("alpha", cp.CONFIRMATION_FILLS + 2, 2, None)]
+    assert ("gamma", cp.VALIDATION_FILLS, 1, tmp_path / "series" / "validation" / "gamma") in calls
+    recs = [json.loads(ln) for ln in (tmp_path / "samples.jsonl").read_text().splitlines()]
+    assert {(r["index"], r["response"]): r["vtk"] for r in recs if "vtk" in r} == {
+        (3, "alpha"): "series/sample_003/alpha", (5, "alpha"): "series/sample_005/alpha",
+        (3, "beta"): "series/sample_003/beta", (5, "beta"): "series/sample_005/beta"}
+    assert res["confirmation"]["responses"]["alpha"]["dem_fills"]  # the analysis ran through
+    assert res["vtk_series"] == []  # the fake DEM writes no files; real ones are listed (next test)
+
+
+def test_tiny_campaign_writes_pvd_for_the_chosen_sample_only(tmp_path):
+    """A real (tiny) campaign design: only sample 1 writes a ParaView series, under
+    <output>/vtk/sample_001/<response>/, and pyvista reads back its particle and wall fields."""
+    pv = pytest.importorskip("pyvista")
+    tiny_cyl = dict(fill_mass=0.4, lift_speed=0.5, max_time_after_lift=0.2)  # ~15 spheres, a few seconds
+    raw = {"name": "tiny-vtk", "device": "cpu", "processes": 1,
+           "parameters": {"mu_s_pp": [0.2, 0.7]}, "fixed": {"mu_r_pp": 0.1, "mu_r_pw": 0.1},
+           "design": {"samples": 3, "held_out": 0, "seed": 0}, "batch_worlds": 3,
+           "responses": [{"name": "gamma", "experiment": "cylinder", "scale": "quick", "settings": tiny_cyl,
+                          "target": 30.0}],
+           "vtk": {"every": 0.1, "samples": [1]}}
+    done = cp.Campaign(cp.parse_config(raw), tmp_path, verbose=False).run_design(progress=False)
+    assert [done[(i, "gamma")]["status"] for i in range(3)] == ["ok"] * 3
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.pvd")) == [
+        "vtk/sample_001/gamma/particles.pvd", "vtk/sample_001/gamma/wall_cylinder.pvd",
+        "vtk/sample_001/gamma/wall_plate.pvd"]
+    assert done[(1, "gamma")]["vtk"] == "vtk/sample_001/gamma" and "vtk" not in done[(0, "gamma")]
+    folder = tmp_path / "vtk" / "sample_001" / "gamma"
+    reader = pv.PVDReader(str(folder / "particles.pvd"))
+    times = np.array(reader.time_values)
+    assert times[0] == 0.0 and np.all(np.diff(times) > 0) and len(times) >= 4
+    # every 0.1 s of simulated time (the protocol clock may jump forward between phases)
+    assert np.median(np.diff(times)) == pytest.approx(0.1, rel=0.02) and np.diff(times).min() > 0.09
+    reader.set_active_time_value(times[-1])
+    cloud = reader.read()[0]
+    assert cloud.n_points > 0
+    assert {"velocity", "angular_velocity", "radius", "id", "contact_force"} <= set(cloud.point_data.keys())
+    assert np.all(cloud["radius"] > 0)
+    walls = pv.PVDReader(str(folder / "wall_cylinder.pvd"))
+    walls.set_active_time_value(walls.time_values[-1])
+    mesh = walls.read()[0]
+    assert mesh.n_cells > 0 and {"energy_n", "impulse_n"} <= set(mesh.cell_data.keys())
