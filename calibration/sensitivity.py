@@ -77,6 +77,34 @@ def _as_function(model: Any) -> Callable[[np.ndarray], np.ndarray]:
     raise TypeError("model must be callable or have a predict(X) method")
 
 
+#: resamples per batch of the bootstrap and of its jackknife (BCa): bounds the memory of the
+#: intervals to a few ``BOOTSTRAP_BATCH x n`` arrays (about 17 MB at n = 2**14) instead of scipy's
+#: ``SobolResult.bootstrap``, which jackknifes all n samples at once (n x (n - 1) index and value
+#: arrays: a 6.9 GB peak at n = 2**14)
+BOOTSTRAP_BATCH = 128
+
+
+def _resampled_indices(Q: np.ndarray, m: int, d: int, idx: np.ndarray) -> np.ndarray:
+    """Saltelli et al. (2010) first-order and total indices (Table 2 (b) and (f), the estimators
+    of :func:`scipy.stats.sobol_indices`) of resamples ``idx`` (..., k) of the n samples.
+
+    Every term is a mean over the samples of a per-sample quantity, stacked in ``Q`` (K, n):
+    f_A + f_B and f_A^2 + f_B^2 (m rows each, mean-centred outputs), f_B (f_AB_i - f_A) and
+    (f_A - f_AB_i)^2 / 2 (d*m rows each). A resample's means are its sample counts times ``Q``
+    (one matrix product per batch). Returns shape (2, m, d, ...)."""
+    n, k = Q.shape[1], idx.shape[-1]
+    rows = idx.reshape(-1, k)
+    r = len(rows)
+    counts = np.bincount((rows + n * np.arange(r)[:, None]).ravel(), minlength=r * n).reshape(r, n)
+    M = (counts.astype(float) @ Q.T) / k  # (r, K) resample means
+    mean, mean_sq = M[:, :m] / 2, M[:, m:2 * m] / 2  # over the 2k outputs of A and B
+    var = (mean_sq - mean**2)[:, None, :]
+    s1 = M[:, 2 * m:2 * m + d * m].reshape(r, d, m) / var
+    st = M[:, 2 * m + d * m:].reshape(r, d, m) / var
+    out = np.stack([s1, st]).transpose(0, 3, 2, 1)  # (2, m, d, r)
+    return out.reshape(2, m, d, *idx.shape[:-1])
+
+
 def sobol_indices(
     model: Any,
     space: ParameterSpace,
@@ -91,25 +119,43 @@ def sobol_indices(
     ----------
     model : ``predict(X)``-object or callable mapping X (N, d) in physical units to
         (N,) or (N, m) responses.
-    n : base sample size, a power of 2; the model is called on ``n * (d + 2)`` points.
-    seed : seed of the (scrambled Sobol') sampling.
-    bootstrap : also compute 95 % bootstrap confidence intervals.
+    n : base sample size, a power of 2; the model is called on ``n * (d + 2)`` points, ``n`` at
+        a time.
+    seed : seed of the (scrambled Sobol') sampling and of the bootstrap resampling.
+    bootstrap : also compute 95 % BCa bootstrap confidence intervals (999 resamples;
+        :func:`scipy.stats.bootstrap` in batches of :data:`BOOTSTRAP_BATCH` resamples).
+
+    The sample matrices A, B, AB are scipy's (``sample_A_B``: a 2d-dimensional scrambled Sobol'
+    sequence split in two); the indices come from :func:`scipy.stats.sobol_indices` on the
+    model outputs.
     """
     if not isinstance(space, ParameterSpace):
         raise TypeError(f"space must be a ParameterSpace, got {type(space).__name__}")
     if n < 2 or (n & (n - 1)) != 0:
         raise ValueError(f"n must be a power of 2 (>= 2), got {n}")
     f = _as_function(model)
+    d = space.dim
+    rng = np.random.default_rng(seed)
 
-    def func(x: np.ndarray) -> np.ndarray:  # scipy passes (d, N), wants (m, N)
+    def evaluate(x: np.ndarray) -> np.ndarray:  # (d, N) -> (m, N)
         y = np.asarray(f(x.T), dtype=float)
-        y = y.reshape(len(x.T), -1).T
+        y = y.reshape(x.shape[1], -1).T
         if not np.all(np.isfinite(y)):
             raise ValueError("model returned NaN or infinite values")
         return y
 
-    dists = [stats.uniform(loc=lo, scale=hi - lo) for lo, hi in zip(space.lower, space.upper)]
-    res = stats.sobol_indices(func=func, n=n, dists=dists, rng=np.random.default_rng(seed))
+    # A, B as scipy.stats.sobol_indices draws them (same rng use, same numbers)
+    A_B = stats.qmc.Sobol(d=2 * d, seed=rng, bits=64).random(n).T.reshape(2, d, -1)
+    for k, (lo, hi) in enumerate(zip(space.lower, space.upper)):
+        A_B[:, k] = stats.uniform(loc=lo, scale=hi - lo).ppf(A_B[:, k])
+    A, B = A_B
+    f_A, f_B = evaluate(A), evaluate(B)
+    f_AB = np.empty((d, *f_A.shape))
+    for k in range(d):  # AB_k: A with its k-th row taken from B; one n-point call each
+        AB_k = A.copy()
+        AB_k[k] = B[k]
+        f_AB[k] = evaluate(AB_k)
+    res = stats.sobol_indices(func={"f_A": f_A, "f_B": f_B, "f_AB": f_AB}, n=n)
     S1 = np.atleast_2d(res.first_order)
     ST = np.atleast_2d(res.total_order)
     m = S1.shape[0]
@@ -118,10 +164,20 @@ def sobol_indices(
         raise ValueError(f"{len(names)} response names for {m} model outputs")
     ci1 = ciT = None
     if bootstrap:
-        b = res.bootstrap(confidence_level=0.95, n_resamples=999)
-        ci1 = np.stack([np.atleast_2d(b.first_order.confidence_interval.low), np.atleast_2d(b.first_order.confidence_interval.high)])
-        ciT = np.stack([np.atleast_2d(b.total_order.confidence_interval.low), np.atleast_2d(b.total_order.confidence_interval.high)])
-    return SobolResult(space.names, names, S1, ST, n, n * (space.dim + 2), ci1, ciT)
+        mean = np.mean([f_A, f_B], axis=(0, -1)).reshape(-1, 1)  # centred as scipy centres them
+        cA, cB, cAB = f_A - mean, f_B - mean, f_AB - mean
+        Q = np.concatenate([cA + cB, cA**2 + cB**2, (cB * (cAB - cA)).reshape(d * m, n),
+                            (0.5 * (cA - cAB) ** 2).reshape(d * m, n)])
+
+        def statistic(idx: np.ndarray, axis: int = -1) -> np.ndarray:  # idx (..., k) -> (2, m, d, ...)
+            return _resampled_indices(Q, m, d, np.asarray(idx))
+
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b = stats.bootstrap((np.arange(n),), statistic, n_resamples=999, batch=BOOTSTRAP_BATCH, vectorized=True,
+                                method="BCa", confidence_level=0.95, rng=rng)
+        low, high = b.confidence_interval.low, b.confidence_interval.high
+        ci1, ciT = np.stack([low[0], high[0]]), np.stack([low[1], high[1]])
+    return SobolResult(space.names, names, S1, ST, n, n * (d + 2), ci1, ciT)
 
 
 def plot_sensitivity(result: SobolResult, path: str | None = None, kind: str = "total",
@@ -138,11 +194,14 @@ def plot_sensitivity(result: SobolResult, path: str | None = None, kind: str = "
 
     P = result.percent_contribution(kind)
     m, d = P.shape
-    fig, axes = plt.subplots(1, m, figsize=(4.2 * m, 3.6), squeeze=False)
+    fig, axes = plt.subplots(1, m, figsize=(4.2 * m, 4.0), squeeze=False, layout="constrained")
     for j in range(m):
         ax = axes[0, j]
         bars = ax.bar(result.parameter_names, P[j], color="tab:blue", alpha=0.8, label=f"this calibration ({kind}-order index, %)")
-        ax.bar_label(bars, fmt="%.1f", fontsize=8)
+        tall = P[j] > 15  # values inside tall bars, above short ones: clear of the markers
+        ax.bar_label(bars, labels=[f"{v:.1f}" if t else "" for v, t in zip(P[j], tall)], label_type="center",
+                     fontsize=8, color="white", fontweight="bold")
+        ax.bar_label(bars, labels=["" if t else f"{v:.1f}" for v, t in zip(P[j], tall)], fontsize=8, padding=2)
         ax.plot(result.parameter_names, 100 * result.first_order[j] / max(np.maximum(result.total_order[j], 0).sum(), 1e-12),
                 "o", color="tab:orange", label="S1 share of sum ST (%)")
         if reference:
@@ -154,8 +213,14 @@ def plot_sensitivity(result: SobolResult, path: str | None = None, kind: str = "
         ax.set_ylabel("contribution (%)")
         ax.set_ylim(0, 100)
         ax.tick_params(axis="x", rotation=30)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    for ax in axes[0, 1:]:  # a reference marker may appear in one panel only
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    seen = dict(zip(labels, handles))  # one entry per name
+    fig.legend(seen.values(), seen.keys(), loc="outside lower center", ncols=min(3, len(seen)), fontsize=8)
     if path is not None:
         fig.savefig(path, dpi=120)
         plt.close(fig)
