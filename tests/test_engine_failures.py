@@ -82,6 +82,21 @@ def test_nan_world_named_as_nan_not_overflow_and_freeze_mode_goes_on():
         sim.run(1, on_unstable="ignore")
 
 
+def test_instability_reported_before_contact_overflow():
+    """A world that both blew up and overflowed its contact slots is named as unstable first
+    (the overflow stays a separate, later error)."""
+    b = wd.ModelBuilder(num_worlds=2, max_contacts=2, gravity=(0, 0, 0))
+    b.add_material(wd.GRAVEL)
+    b.add_spheres([(0, 0, 0), (0.0179, 0, 0), (-0.0179, 0, 0), (0, 0.0179, 0)], R, "gravel", world=1,
+                  velocities=[(0, 0, 3e3), (0, 0, 0), (0, 0, 0), (0, 0, 0)])
+    b.add_sphere((0, 0, 0), R, "gravel", world=0)
+    sim = wd.Simulation(b.finalize("cpu"), DT)
+    with pytest.raises(wd.StabilityError, match="world 1"):
+        sim.run(5)
+    with pytest.raises(wd.ContactOverflowError, match="max_contacts"):
+        sim.solver.check()
+
+
 def test_resume_keeps_unstable_world_frozen_and_settle_reports_it():
     sim = wd.Simulation(box_model(2, fast={0: (0.0, 0.0, -5e3)}).finalize("cpu"), DT)
     with pytest.warns(wd.StabilityWarning, match="world 0"):

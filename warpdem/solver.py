@@ -524,7 +524,9 @@ class Simulation:
             while not paused.all():
                 k = int(min(chunk, n_max[~paused].max() - done))
                 if k > 0:
-                    failed = self.run(k, check_every=k, on_unstable=on_unstable)
+                    # the option is passed only when set, so wrappers of run() without it still work
+                    self.run(k, check_every=k, **({} if on_unstable == "raise" else {"on_unstable": on_unstable}))
+                    failed = self.solver.failed_worlds()
                     done += k
                     if remove_box is not None:
                         removed += self.remove_outside(*remove_box)
