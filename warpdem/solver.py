@@ -370,6 +370,9 @@ class Simulation:
                  max_neighbours: int | None = None, conditional_rebuild: bool = False,
                  v_max: float | None = None) -> None:
         self.model = model
+        # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
+        # "freeze" (the world stays frozen and is listed, the others run on)
+        self.on_unstable = "raise"
         self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
                                 max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild,
                                 v_max=v_max)
@@ -402,13 +405,15 @@ class Simulation:
         return self.solver.failed_worlds()
 
     def run(self, steps: int, check_every: int = 1000, callback: Callable[["Simulation"], None] | None = None,
-            callback_every: int = 0, progress: bool = False, on_unstable: str = "raise") -> dict[int, str]:
+            callback_every: int = 0, progress: bool = False, on_unstable: str | None = None) -> dict[int, str]:
         """Advance ``steps`` steps. ``callback(sim)`` runs every ``callback_every`` steps.
 
         Every ``check_every`` steps :meth:`DEMSolver.check` looks at the device flags. A world
         that became unstable is frozen at once on the device; ``on_unstable="raise"`` then
         raises :class:`StabilityError` naming it, ``"freeze"`` warns and runs the other worlds
-        to the end. Returns the failed worlds ({world: cause}, empty when all are stable)."""
+        to the end (None: the simulation's ``on_unstable`` attribute, "raise" unless set).
+        Returns the failed worlds ({world: cause}, empty when all are stable)."""
+        on_unstable = self.on_unstable if on_unstable is None else on_unstable
         if on_unstable not in UNSTABLE_MODES:
             raise ConfigError(f"on_unstable must be one of {UNSTABLE_MODES}, got {on_unstable!r}")
         failed: dict[int, str] = {}
@@ -496,7 +501,7 @@ class Simulation:
 
     def settle(self, ke_per_particle: float = 1.0e-6, max_time: float | np.ndarray = 1.5,
                check_interval: float = 0.01, min_time: float | np.ndarray = 0.0,
-               remove_box: tuple | None = None, on_unstable: str = "raise") -> "SettleReport":
+               remove_box: tuple | None = None, on_unstable: str | None = None) -> "SettleReport":
         """Run until the mean kinetic energy per active body of every world is below
         ``ke_per_particle`` [J] after ``min_time``, or ``max_time`` [s] passed (scalars or one
         value per world). Bodies leaving ``remove_box`` = (lower, upper) [m] are removed at each
@@ -525,7 +530,7 @@ class Simulation:
                 k = int(min(chunk, n_max[~paused].max() - done))
                 if k > 0:
                     # the option is passed only when set, so wrappers of run() without it still work
-                    self.run(k, check_every=k, **({} if on_unstable == "raise" else {"on_unstable": on_unstable}))
+                    self.run(k, check_every=k, **({} if on_unstable is None else {"on_unstable": on_unstable}))
                     failed = self.solver.failed_worlds()
                     done += k
                     if remove_box is not None:

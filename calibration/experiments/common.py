@@ -616,6 +616,8 @@ class Experiment:
         while True:
             model, sim, dt, limits = self._build_model(law, material, fills, sets, defaults, t_motion, device,
                                                        max_contacts, max_neighbours)
+            # an unstable world is frozen and failed alone; the others of the batch run on
+            sim.on_unstable = "freeze"
             ctx = RunContext(self, sim, fills, progress)
             ctx.log(f"{nw} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, dt={dt:.3g} s "
                     f"(limit {limits.limit:.3g} s)")
@@ -646,6 +648,7 @@ class Experiment:
                 fatal = f"{type(exc).__name__}: {exc}"
             break
         sim_s = time.perf_counter() - sim0
+        unstable = sim.failed_worlds()
         timing = {"wall_s": round(time.perf_counter() - wall0, 3), "build_s": round(build_s, 3),
                   "simulate_s": round(sim_s, 3), "steps": int(sim.steps), "dt_s": dt,
                   "simulated_s": round(sum(ctx.phases.values()), 6),
@@ -672,6 +675,8 @@ class Experiment:
             r.bulk_density = o.get("bulk_density")
             if fatal is not None:
                 r.fail(fatal)
+            elif w in unstable:
+                r.fail(f"unstable world ({unstable[w]}): frozen by the engine, its measurement is void")
             elif ctx.errors[w] is not None:
                 r.fail(ctx.errors[w])
             elif o.get("angle") is None or not math.isfinite(o["angle"]):

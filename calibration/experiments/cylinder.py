@@ -119,10 +119,12 @@ class HollowCylinder(Experiment):
             removed = level(ctx.sim, self.level_height)
             for w in range(nw):
                 ctx.diag[w]["levelled_removed"] = int(removed[w])
-        # lift until the bottom edge clears the pile top (highest active top of all worlds) (spec C "Protocol")
+        # lift until the bottom edge clears the pile top (highest active top of all worlds) (spec C "Protocol");
+        # a world the engine froze as unstable does not steer the lift
         active = ctx.sim.state.body_active.numpy() != 0
         tops = body_tops(ctx.sim)
-        pile_top = float(tops[active].max())
+        live = active & ~np.isin(ctx.model.host["body_world"], list(ctx.sim.failed_worlds()))
+        pile_top = float(tops[live if live.any() else active].max())
         material = self.bulk_material()
         clearance = self.lift_clearance if self.lift_clearance is not None else 2.0 * material.max_bounding_radius
         lift_time = (pile_top + clearance) / self.lift_speed
