@@ -24,7 +24,8 @@ elif [ "$phase" = diagnose ]; then
   # the four diagnoses in ONE process: their DEM requests are pooled into shared launches
   # (validation.pooled; four processes on one GPU time-slice it and ran small launches ~5x slower).
   # Interrupted (a 10-minute call)? Run it again: every finished world is in the cache.
-  $py -m validation.cli "$out"/diagnose_{base,rolling,cohesion,shape}.yaml --device "$device" > "$out/diagnose.log" 2>&1
+  # (run inside OUT: the configs' output folders are relative to the working directory)
+  (cd "$out" && $py -m validation.cli diagnose_{base,rolling,cohesion,shape}.yaml --device "$device" > diagnose.log 2>&1)
 else
   echo "unknown phase $phase" >&2; exit 2
 fi
