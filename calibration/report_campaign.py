@@ -133,6 +133,11 @@ def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Re
     figures = [Figure.from_path(folder / f, cap) for f, cap in _FIGURES if (folder / f).is_file()]
     if figures:
         sections.append(Section("Figures", figures))
+    if results.get("vtk_series"):
+        sections.append(Section("ParaView time series", [
+            "Runs recorded on request (config section vtk): open a folder's particles.pvd and wall_*.pvd "
+            "in ParaView (relative to this report's folder).",
+            Table(["folder", "files"], [[f, "particles.pvd, wall_*.pvd"] for f in results["vtk_series"]])]))
     mat_text = "each experiment's default material" if not material else (
         material.get("name", json.dumps(material)) if isinstance(material, Mapping) else str(material))
     sections.append(Section("Material and contact law", [

@@ -57,3 +57,11 @@ def test_renders_in_headless_chromium(tmp_path):
     from PIL import Image
     img = np.asarray(Image.open(shot).convert("L"), dtype=float)
     assert img.std() > 10  # not blank
+
+
+def test_recorded_vtk_series_are_listed(tmp_path):
+    res = fake_results(33.0)
+    assert "ParaView" not in write_campaign_report(res, tmp_path).read_text()
+    res["vtk_series"] = ["vtk/sample_003/alpha_static", "vtk/target/beta_dynamic"]
+    text = write_campaign_report(res, tmp_path).read_text()
+    assert "ParaView time series" in text and "vtk/sample_003/alpha_static" in text
