@@ -166,6 +166,22 @@ def place_sphere_views(
 
 
 @wp.func
+def effective_youngs_modulus(e_i: float, nu_i: float, e_j: float, nu_j: float):
+    """Hertz's effective Young's modulus E* = 1 / ((1 - nu_i^2) / E_i + (1 - nu_j^2) / E_j) [Pa]
+    (warpdem.contact.hertz_mindlin)."""
+    return 1.0 / ((1.0 - nu_i * nu_i) / e_i + (1.0 - nu_j * nu_j) / e_j)
+
+
+@wp.func
+def effective_shear_modulus(e_i: float, nu_i: float, e_j: float, nu_j: float):
+    """Mindlin & Deresiewicz (1953) effective shear modulus G* = 1 / ((2 - nu_i) / G_i + (2 - nu_j) / G_j),
+    G = E / (2 (1 + nu)) [Pa] (warpdem.contact.hertz_mindlin: the seed paper's eqs. (7)/(10) misprint it)."""
+    g_i = e_i / (2.0 * (1.0 + nu_i))
+    g_j = e_j / (2.0 * (1.0 + nu_j))
+    return 1.0 / ((2.0 - nu_i) / g_i + (2.0 - nu_j) / g_j)
+
+
+@wp.func
 def mass_felt_at(m: float, i_mean: float, lever: wp.vec3, n: wp.vec3):
     """Effective mass [kg] of a rigid body along the unit normal ``n`` at a contact reached
     by ``lever`` [m] from its centre of mass: 1 / (1/m + |lever x n|^2 / I), the inverse of
@@ -615,7 +631,6 @@ def contact_kernel(law: ContactLaw):
         ib_mean = me.i_mean
         e_i = mat_e[mi]
         nu_i = mat_nu[mi]
-        g_i = e_i / (2.0 * (1.0 + nu_i))
         n_old = count_in[i]
         n_new = int(0)
         f_sum = wp.vec3(0.0)
@@ -743,7 +758,6 @@ def contact_kernel(law: ContactLaw):
             mw = wall_material[kw]
             e_w = mat_e[mw]
             nu_w = mat_nu[mw]
-            g_w = e_w / (2.0 * (1.0 + nu_w))
             c = ContactInput()
             c.normal = nrm
             c.overlap = depth
@@ -754,8 +768,8 @@ def contact_kernel(law: ContactLaw):
             c.radius_j = 0.0  # a wall: flat partner (infinite radius)
             # lever x n: the contact point lies on the line through the sphere centre along n
             c.m_eff = mass_felt_at(mb, ib_mean, xi - xb, nrm)
-            c.e_eff = 1.0 / ((1.0 - nu_i * nu_i) / e_i + (1.0 - nu_w * nu_w) / e_w)
-            c.g_eff = 1.0 / ((2.0 - nu_i) / g_i + (2.0 - nu_w) / g_w)
+            c.e_eff = effective_youngs_modulus(e_i, nu_i, e_w, nu_w)
+            c.g_eff = effective_shear_modulus(e_i, nu_i, e_w, nu_w)
             c.arm = ri - depth
             c.i_eff = ib_mean
             c.dt = dt
@@ -816,7 +830,6 @@ def contact_kernel(law: ContactLaw):
             mj = other.mat
             e_j = mat_e[mj]
             nu_j = mat_nu[mj]
-            g_j = e_j / (2.0 * (1.0 + nu_j))
             c = ContactInput()
             c.normal = nrm
             c.overlap = overlap
@@ -828,8 +841,8 @@ def contact_kernel(law: ContactLaw):
             m_i = mass_felt_at(mb, ib_mean, xi - xb, nrm)
             m_j = mass_felt_at(mbj, ibj_mean, other.x - xbj, nrm)
             c.m_eff = m_i * m_j / (m_i + m_j)
-            c.e_eff = 1.0 / ((1.0 - nu_i * nu_i) / e_i + (1.0 - nu_j * nu_j) / e_j)
-            c.g_eff = 1.0 / ((2.0 - nu_i) / g_i + (2.0 - nu_j) / g_j)
+            c.e_eff = effective_youngs_modulus(e_i, nu_i, e_j, nu_j)
+            c.g_eff = effective_shear_modulus(e_i, nu_i, e_j, nu_j)
             c.arm = arm_i
             c.i_eff = ib_mean * ibj_mean / (ib_mean + ibj_mean)
             c.dt = dt
