@@ -106,6 +106,16 @@ def wall_centre(t: wp.float64, t_start: float, t_stop: float, origin: wp.vec3, l
     return origin + lin_vel * float(wall_motion_time(t, t_start, t_stop))
 
 
+@wp.func
+def point_in_wall_rest_frame(x: wp.vec3, t: wp.float64, t_start: float, t_stop: float, origin: wp.vec3,
+                             lin_vel: wp.vec3, ang_vel: wp.vec3):
+    """Where the point ``x`` [m] lies in a rigidly moving wall's rest mesh at time ``t``:
+    x0 = c0 + R^T (x - c(t)); also returns R and c(t) to map results back (x = c(t) + R (x0 - c0))."""
+    rot = wall_rotation(t, t_start, t_stop, ang_vel)
+    c_now = wall_centre(t, t_start, t_stop, origin, lin_vel)
+    return origin + wp.quat_rotate_inv(rot, x - c_now), rot, c_now
+
+
 # A wall moves rigidly: a point x0 of its rest mesh is at  x(t) = c(t) + R(w tau) (x0 - c0).
 # The engine never moves the mesh: a sphere at x is looked up in the rest mesh at
 # x0 = c0 + R^T (x - c(t)), and the closest point and normal found there are mapped back.
@@ -407,10 +417,8 @@ def wall_overlap(
     which = int(-1)
     for kk in range(world_wall_start[world], world_wall_start[world + 1]):
         k = world_wall_index[kk]
-        rot = wall_rotation(t, wall_t_start[k], wall_t_stop[k], wall_ang_vel[k])
-        c_rest = wall_origin[k]
-        c_now = wall_centre(t, wall_t_start[k], wall_t_stop[k], c_rest, wall_lin_vel[k])
-        x_rest = c_rest + wp.quat_rotate_inv(rot, xi - c_now)
+        x_rest, rot, c_now = point_in_wall_rest_frame(xi, t, wall_t_start[k], wall_t_stop[k], wall_origin[k],
+                                                      wall_lin_vel[k], wall_ang_vel[k])
         q = wp.mesh_query_point_no_sign(wall_mesh[k], x_rest, ri)
         if q.result:
             cp = wp.mesh_eval_position(wall_mesh[k], q.face, q.u, q.v)
@@ -656,10 +664,9 @@ def contact_kernel(law: ContactLaw):
             c_rest = wp.vec3(0.0)
             x_rest = xi
             if moving != 0:
-                rot = wall_rotation(t_now, wall_t_start[k], wall_t_stop[k], wall_ang_vel[k])
                 c_rest = wall_origin[k]
-                c_now = wall_centre(t_now, wall_t_start[k], wall_t_stop[k], c_rest, wall_lin_vel[k])
-                x_rest = c_rest + wp.quat_rotate_inv(rot, xi - c_now)
+                x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, wall_t_start[k], wall_t_stop[k], c_rest,
+                                                              wall_lin_vel[k], wall_ang_vel[k])
             mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
             tri = int(0)
             while wp.mesh_query_aabb_next(mquery, tri):
