@@ -191,9 +191,14 @@ def add_reading_resolution(doc: dict[str, Any]) -> dict[str, Any]:
     for exp in doc.get("experiments", {}).values():
         for cond in exp.get("conditions", {}).values():
             for ob in cond.get("observables", {}).values():
-                if "resolution" not in ob and ob.get("unit") in READING_RESOLUTION:
-                    ob["resolution"] = READING_RESOLUTION[ob["unit"]]
+                _state_resolution(ob)
     return doc
+
+
+def _state_resolution(ob: dict[str, Any]) -> None:
+    """Set an observable's ``resolution`` from its unit unless it states one."""
+    if "resolution" not in ob and ob.get("unit") in READING_RESOLUTION:
+        ob["resolution"] = READING_RESOLUTION[ob["unit"]]
 
 
 def _observables(reported: dict[str, str], rs: list) -> dict[str, Any]:
@@ -213,8 +218,7 @@ def _observables(reported: dict[str, str], rs: list) -> dict[str, Any]:
             continue
         obs[q] = {"unit": unit, "repeats": [round(float(v), 6) for v in vals]}
     for ob in obs.values():
-        if ob["unit"] in READING_RESOLUTION:
-            ob["resolution"] = READING_RESOLUTION[ob["unit"]]
+        _state_resolution(ob)
     return obs
 
 
