@@ -1,0 +1,127 @@
+"""Score the diagnoses of the hidden-effects proof against the generator's truth (issue 11).
+
+The diagnoses (``benchmarks/hidden_effects_proof.sh OUT diagnose``) read only their
+``lab_<case>.yaml``; this script is the only reader of ``truth_<case>.json`` and it runs
+afterwards. For each case it states what was hidden, what the diagnosis ranked first (with the
+evidence gap to the runner-up), what it added, the error history (chi^2/dof and the largest DEM
+|z| before and after) and the recalibrated parameters next to the true ones.
+
+    python benchmarks/score_hidden_effects.py docs/results/hidden_effects_paper
+    python benchmarks/score_hidden_effects.py OUT --json OUT/score.json --markdown OUT/score.md
+
+A case passes when the top-ranked candidate is the hidden effect (for the base case: the verdict
+"no effect is needed"); the recalibration's agreement is reported separately, since a right
+effect with an imperfect recalibration is a different failure from a wrong effect.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+CASES = ("base", "rolling", "cohesion", "shape")
+
+
+def hidden_effect(truth: dict[str, Any]) -> str | None:
+    """The candidate-effect name of what the generator hid (None: the base model is right)."""
+    hidden = truth["hidden"]
+    if hidden.get("shape"):
+        return "shape"
+    law = hidden.get("law", {})
+    if law.get("cohesion", "none") != "none":
+        return "cohesion"
+    if law.get("rolling", "none") != "none":
+        return "rolling_resistance"
+    return None
+
+
+def score_case(folder: Path, case: str) -> dict[str, Any]:
+    """One case's row: hidden vs found, evidence, error history and parameters."""
+    truth = json.loads((folder / f"truth_{case}.json").read_text())
+    result_path = folder / f"diagnosis_{case}" / "diagnosis.json"
+    if not result_path.exists():
+        return {"case": case, "hidden": hidden_effect(truth), "finished": False}
+    diag = json.loads(result_path.read_text())
+    hidden = hidden_effect(truth)
+    verdict = diag["verdict"]
+    versions = diag["error_history"]["versions"]
+    row: dict[str, Any] = {
+        "case": case, "finished": True, "hidden": hidden, "hidden_words": truth["words"],
+        "headline": verdict["headline"], "base_adequate": verdict["base_adequate"],
+        "added": list(verdict["added_effects"]),
+        "history": [{"version": v["version"], "chi2_per_dof": v["chi2_per_dof"], "max_abs_z": v["max_abs_z"],
+                     "n_within": v["n_within"], "n_observables": v["n_observables"]} for v in versions],
+        "dem_seconds": diag["forward_model"]["seconds"], "dem_runs": diag["forward_model"]["runs"],
+    }
+    if diag["rounds"]:
+        ranked = sorted(diag["rounds"][0]["candidates"], key=lambda c: c["rank"])
+        row["ranking"] = [{"effect": c["effect"]["name"], "ln_bayes": c["log_bayes_vs_current"],
+                           "max_abs_z_dem": c["max_abs_z"]} for c in ranked]
+        row["top"] = ranked[0]["effect"]["name"]
+        row["ln_bayes_gap"] = (ranked[0]["log_bayes_vs_current"] - ranked[1]["log_bayes_vs_current"]
+                               if len(ranked) > 1 else None)
+    else:
+        row["ranking"], row["top"], row["ln_bayes_gap"] = [], None, None
+    row["found"] = row["top"] == hidden if hidden else verdict["base_adequate"] and not row["added"]
+    final = versions[-1]
+    row["final_within_2_sigma"] = final["n_within"] == final["n_observables"]
+    true_p = truth["parameters"]
+    best = diag["versions"][-1].get("best_fit") or {}
+    best_x = best.get("parameters") if isinstance(best, dict) and "parameters" in best else best
+    row["parameters"] = {k: {"recalibrated": float(v), "true": true_p.get(k)} for k, v in (best_x or {}).items()
+                         if isinstance(v, (int, float))}
+    return row
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    """A table a person reads: one line per case, then the parameters."""
+    out = ["| case (hidden) | ranked first (ln B) | runner-up (ln B) | found | added | chi2/dof before -> after "
+           "| max DEM abs z before -> after | all within 2 sigma after |",
+           "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if not r["finished"]:
+            out.append(f"| {r['case']} ({r['hidden']}) | not finished | | | | | | |")
+            continue
+        rk = r["ranking"]
+        first = f"{rk[0]['effect']} ({rk[0]['ln_bayes']:+.1f})" if rk else "- (base adequate)"
+        second = f"{rk[1]['effect']} ({rk[1]['ln_bayes']:+.1f})" if len(rk) > 1 else "-"
+        h = r["history"]
+        chi = " -> ".join(f"{v['chi2_per_dof']:.2f}" for v in h)
+        z = " -> ".join(f"{v['max_abs_z']:.1f}" for v in h)
+        out.append(f"| {r['case']} ({r['hidden'] or 'none'}) | {first} | {second} | "
+                   f"{'yes' if r['found'] else 'NO'} | {', '.join(r['added']) or '-'} | {chi} | {z} | "
+                   f"{'yes' if r['final_within_2_sigma'] else 'no'} |")
+    out.append("")
+    for r in rows:
+        if r.get("parameters"):
+            pars = ", ".join(f"{k} {v['recalibrated']:.3g} (true {v['true']:.3g})"
+                             for k, v in r["parameters"].items() if v["true"] is not None)
+            out.append(f"- {r['case']}: {pars}")
+    return "\n".join(out) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("folder", type=Path, help="the proof's output folder (truth_*.json, diagnosis_*/)")
+    ap.add_argument("--json", type=Path, default=None, help="write the rows as JSON here")
+    ap.add_argument("--markdown", type=Path, default=None, help="write the table as Markdown here")
+    args = ap.parse_args(argv)
+    missing = [c for c in CASES if not (args.folder / f"truth_{c}.json").exists()]
+    if missing:
+        print(f"score_hidden_effects: no truth file for {', '.join(missing)} in {args.folder}", file=sys.stderr)
+        return 2
+    rows = [score_case(args.folder, c) for c in CASES]
+    found = sum(bool(r.get("found")) for r in rows)
+    text = f"Hidden effect found in {found} of {len(rows)} cases.\n\n" + markdown(rows)
+    print(text)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    if args.markdown:
+        args.markdown.write_text(text)
+    return 0 if found == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
