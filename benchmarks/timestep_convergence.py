@@ -15,6 +15,7 @@ import json
 import time
 
 import numpy as np
+import warp as wp
 
 import warpdem as wd
 from calibration.experiments import make_experiment
@@ -46,6 +47,7 @@ def main(argv=None) -> int:
     ap.add_argument("--fills", type=int, default=3)
     ap.add_argument("--processes", default="auto")
     args = ap.parse_args(argv)
+    wp.config.quiet = True  # stdout carries only the JSON lines
     for case in args.cases:
         law_cfg, mat_cfg, params = CASES[case]
         law = wd.ContactLaw(**law_cfg)
