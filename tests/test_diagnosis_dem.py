@@ -80,3 +80,23 @@ def test_model_errors_name_the_parameter(tiny_lab, tmp_path, capsys):
         assert diagnose_main([str(path)]) == 2, change
         err = capsys.readouterr().err
         assert message in err, (change, err)
+
+
+def test_ctrl_c_says_what_is_kept_and_how_to_resume(tiny_lab, tmp_path, capsys, monkeypatch):
+    """Ctrl-C ends with one line naming the cache and the way to resume, exit code 130, no traceback."""
+    import validation.pooled
+
+    def interrupted(pool, tasks, names=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(validation.pooled, "run_as_workers", interrupted)
+    shutil.copy(tiny_lab / "lab_rolling.yaml", tmp_path)
+    cfg_doc = yaml.safe_load((tiny_lab / "diagnose_rolling.yaml").read_text())
+    cfg_doc["output"] = str(tmp_path / "out")
+    cfg_doc["cache"] = str(tmp_path / "dem_cache.jsonl")
+    cfg = tmp_path / "diagnose_rolling.yaml"
+    cfg.write_text(yaml.safe_dump(cfg_doc))
+    assert diagnose_main([str(cfg), "--processes", "1"]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "dem_cache.jsonl" in err and "run the same command again" in err
+    assert "Traceback" not in err

@@ -165,3 +165,25 @@ def test_cli_refuses_two_configs_writing_one_folder(tmp_path, capsys):
     paths = _tiny_configs(tmp_path, output=str(tmp_path / "out0"))
     assert diagnose_main([*paths, "--device", "cpu"]) == 2
     assert "same output folder" in capsys.readouterr().err
+
+
+def test_a_torn_dem_cache_line_is_reported_dropped_and_later_appends_stay_readable(tmp_path, capsys):
+    """A write cut by an interruption leaves half a line; loading reports it, rewrites the file
+    without it, and the next record starts on its own line (it would otherwise be glued to the
+    fragment and lost at the following load)."""
+    import json
+
+    import warpdem as wd
+    from calibration.model_description import ModelDescription
+    from validation.dem_forward import DEMForwardModel
+
+    cache = tmp_path / "dem_cache.jsonl"
+    good = [{"id": "a", "values": {"x": 1.0}}, {"id": "b", "values": {"x": 2.0}}]
+    cache.write_text("".join(json.dumps(r) + "\n" for r in good) + '{"id": "c", "val')
+    forward = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)
+    assert set(forward._cache) == {"a", "b"}
+    assert "1 torn line(s) dropped" in capsys.readouterr().err
+    forward._store({"id": "d", "values": {"x": 4.0}})
+    again = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)
+    assert set(again._cache) == {"a", "b", "d"}
+    assert "torn" not in capsys.readouterr().err

@@ -243,7 +243,16 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     for path, obs, space, cands, _, settings, out in jobs:
         print(f"warpdem diagnose: {path}: {len(list(obs))} observables, base parameters {space.names}, candidates "
               f"{[c.name for c in cands]}; output {out}", file=sys.stderr, flush=True)
-    results = run_as_workers(pool, [(lambda j=j: diagnose(j[1], j[2], j[3], pool, j[5])) for j in jobs])
+    try:
+        results = run_as_workers(pool, [(lambda j=j: diagnose(j[1], j[2], j[3], pool, j[5])) for j in jobs],
+                                 names=[Path(j[0]).stem for j in jobs])
+    except KeyboardInterrupt:
+        cache = getattr(forward, "cache_path", None)
+        kept = (f"{forward.dem_worlds} DEM world(s) run in this sitting are kept in {cache}; run the same command "
+                "again to resume from there" if cache else "no DEM cache is configured ('cache:' in the config), so "
+                "the DEM worlds run so far are lost")
+        print(f"warpdem diagnose: interrupted after {time.perf_counter() - t0:.0f} s; {kept}", file=sys.stderr)
+        return 130
     wall = round(time.perf_counter() - t0, 1)
     for (path, *_, out), result in zip(jobs, results):
         paths = result.write(out)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -110,12 +111,29 @@ class DEMForwardModel(ForwardModel):
         self.dem_worlds = 0
         self.log: list[dict[str, Any]] = []
         if self.cache_path is not None and self.cache_path.exists():
-            for line in self.cache_path.read_text().splitlines():
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:  # a torn last line from an interrupted run: re-run it
-                    continue
+            self._load_cache()
+
+    def _load_cache(self) -> None:
+        """Read the cache; a torn line (a write cut by an interruption) is reported, dropped from
+        the file (rewritten atomically, so later appends start on a fresh line) and its world re-run."""
+        assert self.cache_path is not None
+        kept: list[str] = []
+        torn = 0
+        for line in self.cache_path.read_text().splitlines():
+            if not line.strip():
+                continue
+            try:
+                rec = json.loads(line)
                 self._cache[rec["id"]] = rec
+                kept.append(line)
+            except (json.JSONDecodeError, KeyError, TypeError):
+                torn += 1
+        if torn:
+            print(f"DEM cache {self.cache_path}: {torn} torn line(s) dropped (a write cut by an interruption); "
+                  "those worlds will be run again", file=sys.stderr, flush=True)
+            tmp = self.cache_path.with_suffix(self.cache_path.suffix + ".tmp")
+            tmp.write_text("".join(k + "\n" for k in kept))
+            os.replace(tmp, self.cache_path)
 
     # ------------------------------------------------------------------ helpers
     def material_for(self, experiment: str) -> BulkMaterial:

@@ -165,9 +165,11 @@ class PooledForward(ForwardModel):
         self._cv.notify_all()
 
 
-def run_as_workers(pool: ForwardModel, tasks: Sequence[Callable[[], Any]]) -> list[Any]:
+def run_as_workers(pool: ForwardModel, tasks: Sequence[Callable[[], Any]],
+                   names: Sequence[str] | None = None) -> list[Any]:
     """Run ``tasks`` in threads, each a worker of ``pool`` when it is a :class:`PooledForward`
     (else one after another); returns their results in order, re-raising the first error.
+    ``names`` label the threads (progress lines say which task they come from).
 
     A calling worker is idle while its tasks run, and the tasks are registered before any of
     them starts, so their first requests are merged."""
@@ -187,8 +189,8 @@ def run_as_workers(pool: ForwardModel, tasks: Sequence[Callable[[], Any]]) -> li
             pool._leave()
 
     pool._add_workers(len(tasks))
-    threads = [threading.Thread(target=body, args=(i,), name=f"pooled-worker-{i}", daemon=True)
-               for i in range(len(tasks))]
+    threads = [threading.Thread(target=body, args=(i,), name=names[i] if names else f"pooled-worker-{i}",
+                                daemon=True) for i in range(len(tasks))]
     with pool.idle():
         for th in threads:
             th.start()
