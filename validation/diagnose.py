@@ -10,8 +10,19 @@
    conditions are forecast under each and the most separating one is named
    (:mod:`validation.discrimination`);
 4. the chosen effect (the top candidate, or ``settings.add``) is recalibrated with a second
-   design wave and confirmed by DEM; the error history records every version
-   (:mod:`validation.history`); repeated up to ``max_added_effects`` times while inadequate.
+   design wave and confirmed by DEM, and with further waves (up to ``max_refine_waves``) while
+   the DEM at the best fit disagrees with the surrogate there; the error history records every
+   version (:mod:`validation.history`); repeated up to ``max_added_effects`` times while inadequate.
+
+Which studies get the disagreement-driven waves (:func:`validation.study.refine_study`): the
+recalibrated version always, and the base model when it is judged adequate -- in both cases that
+study is the verdict's, and its DEM-confirmed residuals are what the user reads.  The candidates
+of a ranking round get none: they are ranked by surrogate evidence over the whole box, which a
+local miss at one best fit moves little, and a wave costs every candidate ``refine_points x
+replicates + confirm_replicates`` DEM runs (on a GPU about one launch pair, ~8 min at paper
+scale, per wave); the chosen candidate is refined anyway, and a candidate whose surrogate
+disagrees with its own confirmation is named in the details.  An inadequate base model gets none
+either: it is only the "before" of the error history, and its misfit is DEM-confirmed.
 
 :class:`DiagnosisResult` holds every number; :meth:`DiagnosisResult.write` saves the JSON, the
 figures and the HTML report.
@@ -293,6 +304,11 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     seconds: dict[str, float] = {}
     _say("studying the base model")
     base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed)
+    if base.adequacy.adequate and not (base.check.agrees or base.check.dem_within) and settings.max_refine_waves > 1:
+        _say(f"the base model's surrogate disagrees with the DEM at its best fit "
+             f"({', '.join(base.check.disagreeing)}): refining")
+        base = refine_study(base, obs, runner, settings, settings.seed + 500, first_wave_unconditional=False,
+                            say=_say)
     seconds["base_study"] = base.seconds
     _say(f"base model studied in {base.seconds:.0f} s: {'adequate' if base.adequacy.adequate else 'inadequate'}")
     base_noise = (base.noise_sd, base.noise_dof)  # one variance model for every version (validation.study)
@@ -334,7 +350,8 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         pick = next(c for c in rnd.candidates if c.name == chosen)
         t0 = time.perf_counter()
         _say(f"recalibrating with '{chosen}' added")
-        recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise)
+        recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise,
+                             say=_say)
         seconds["recalibration"] += time.perf_counter() - t0
         versions.append(recal)
         history = history.appended(_errors(recal, settings))
@@ -355,11 +372,18 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
     met = bool(last.n_within == last.n_observables and last.n_observables > 0)
     details = [base.adequacy.sentence]
     steps: list[str] = []
+    # the final study's surrogate still contradicted by the DEM at its best fit (after its waves)
+    unsettled = [] if met or final.check is None else list(final.check.disagreeing)
+    n_waves = len(final.refinement)
+    waves_words = f" after {n_waves} refinement wave{'s' if n_waves != 1 else ''}" if n_waves else ""
     if base.adequacy.adequate and len(versions) == 1:
         headline = (f"No effect is needed: the base model reproduces all {first.n_observables} observables "
                     f"(DEM at the best fit: largest |z| {first.max_abs_z:.1f})")
         if not met:
             headline += f"; {first.n_observables - first.n_within} lie beyond {w:g} sigma at the single best fit"
+        if unsettled:
+            headline += (f"; the surrogate still disagrees with the DEM there for {', '.join(unsettled)}"
+                         f"{waves_words}")
         steps.append("Use a parameter set from the plausible set; to narrow it, measure more observables "
                      "(drum speeds, the pile test, bulk density).")
     elif len(versions) == 1:
@@ -376,6 +400,9 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         headline = (f"{lead}with {added} added, {state} (DEM at the recalibrated best fit, largest |z| "
                     f"{last.max_abs_z:.1f})")
         headline = headline[0].upper() + headline[1:]
+        if unsettled:
+            headline += (f"; the surrogate still disagrees with the DEM at that best fit for {', '.join(unsettled)}"
+                         f"{waves_words}, so a better fit may exist: this is not yet a failure of {added}")
         tied_round = next((r for r in rounds if r.discrimination is not None and r.chosen is not None), None)
         if tied_round is not None:
             d = tied_round.discrimination
@@ -389,6 +416,11 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
                      + ".")
     for r in rounds:
         details.extend(c.sentence for c in r.candidates)
+        for c in r.candidates:
+            if c.study.check is not None and not c.study.check.agrees and c.name != r.chosen:
+                details.append(f"For {c.effect.words} the surrogate disagrees with the DEM at its best fit "
+                               f"({', '.join(c.study.check.disagreeing)}): its sentence describes that point, "
+                               "which may not be the best this effect can do.")
         if r.discrimination is not None:
             details.append(r.discrimination.sentence)
             d = r.discrimination
@@ -409,7 +441,11 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
     if len(history.versions) > 1:
         details.append(f"Error history (DEM): chi2 per observable {first.chi2_per_observable:.2f} -> "
                        f"{last.chi2_per_observable:.2f}; largest |z| {first.max_abs_z:.1f} -> {last.max_abs_z:.1f}.")
-    off = [k for k, v in last.z.items() if not abs(v) <= w]
+    if unsettled:
+        steps.append(f"The surrogate still disagrees with the DEM at the best fit for {', '.join(unsettled)}"
+                     f"{waves_words}: add design points (refine_points, max_refine_waves, "
+                     "design_points_per_parameter) and rerun before reading the misfit there as the model's.")
+    off = [k for k, v in last.z.items() if not abs(v) <= w and k not in unsettled]
     if off and len(versions) > 1:
         steps.append(f"Still beyond {w:g} sigma: {', '.join(off)}; try the next candidate (max_added_effects) or "
                      "review these measurements.")

@@ -25,6 +25,11 @@ class DiagnosisSettings:
     confirm_replicates : fills of the DEM confirmation run at each best fit.
     refine_points : extra design sets placed in the plausible region when the chosen effect is
         recalibrated (a second history-matching wave; 0: none).
+    max_refine_waves : most history-matching waves of that recalibration: the first always runs,
+        each further one only while the DEM at the recalibrated best fit disagrees with the
+        surrogate there (:func:`validation.study.refine_study`); its confirmation runs join the
+        design.  An adequate base model gets up to ``max_refine_waves - 1`` such waves.  0 and 1:
+        the single recalibration wave, no re-checks.
     scan_points : Sobol points of the surrogate scan of the box (rounded up to a power of 2).
     evidence_samples : importance samples of the evidence integral.
     cutoff : implausibility cut-off (3: Pukelsheim's 3-sigma rule; Vernon et al. 2010).
@@ -48,6 +53,7 @@ class DiagnosisSettings:
     replicates: int = 2
     confirm_replicates: int = 3
     refine_points: int = 8
+    max_refine_waves: int = 3
     scan_points: int = 2 ** 14
     evidence_samples: int = 2 ** 13
     cutoff: float = 3.0
@@ -69,6 +75,7 @@ class DiagnosisSettings:
         _int("replicates", self.replicates, 2)
         _int("confirm_replicates", self.confirm_replicates, 1)
         _int("refine_points", self.refine_points, 0)
+        _int("max_refine_waves", self.max_refine_waves, 0)
         _int("scan_points", self.scan_points, 64)
         _int("evidence_samples", self.evidence_samples, 256)
         _int("max_added_effects", self.max_added_effects, 0)

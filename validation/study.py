@@ -12,6 +12,11 @@ The confirmation runs the forward model at the surrogate's best fit with ``confi
 fresh fills; its residuals use the mean of those runs in place of the surrogate
 (``Var_sim = s_DEM^2 / R``, :mod:`validation.misfit`), so every number reported as "after
 adding the effect" is a simulation, not a surrogate prediction.
+
+Every study also checks its surrogate against that confirmation (:func:`check_surrogate`), and
+:func:`refine_study` adds history-matching waves while the two disagree: a surrogate that is
+wrong near the optimum otherwise puts the "best fit" where the DEM is not best, and the misfit
+left there reads as a failure of the model when it is one of the surrogate.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -34,12 +39,14 @@ from .search import BestFit, SurrogateScan, find_best_fit, scan_box
 from .settings import DiagnosisSettings
 from .surrogates import SurrogateSet, fit_surrogates
 
-__all__ = ["Confirmation", "ModelStudy", "study_model", "refine_study", "confirm"]
+__all__ = ["Confirmation", "SurrogateCheck", "RefinementWave", "ModelStudy", "study_model", "refine_study",
+           "confirm", "check_surrogate"]
 
 
 @dataclass(frozen=True)
 class Confirmation:
-    """DEM runs at one parameter set: per observable mean, spread (sample sd), successful runs, z."""
+    """DEM runs at one parameter set: per observable mean, spread (sample sd), successful runs, z;
+    ``x`` the set in physical units and ``runs`` (replicates, m) every fill's value (NaN = failed)."""
 
     parameters: dict[str, float]
     replicates: int
@@ -47,10 +54,19 @@ class Confirmation:
     spread: np.ndarray
     n_ok: np.ndarray
     z: np.ndarray
+    x: np.ndarray | None = None
+    runs: np.ndarray | None = None
+
+    def as_design(self, keys: tuple[str, ...]) -> DesignData:
+        """The confirmation runs as a one-set design (to join a refit: DEM results are never thrown away)."""
+        if self.x is None or self.runs is None:
+            raise ValueError("this confirmation kept no runs to join a design")
+        return DesignData(np.asarray(self.x, float)[None], np.asarray(self.runs, float)[None], keys)
 
     def to_dict(self) -> dict:
         return {"parameters": self.parameters, "replicates": self.replicates, "mean": self.mean.tolist(),
-                "spread": self.spread.tolist(), "n_ok": self.n_ok.tolist(), "z": self.z.tolist()}
+                "spread": self.spread.tolist(), "n_ok": self.n_ok.tolist(), "z": self.z.tolist(),
+                "runs": None if self.runs is None else self.runs.tolist()}
 
 
 def confirm(version: ModelVersion, x: np.ndarray, runner: ForwardRunner, misfit: Misfit, replicates: int) -> Confirmation:
@@ -65,7 +81,97 @@ def confirm(version: ModelVersion, x: np.ndarray, runner: ForwardRunner, misfit:
         spread = np.nanstd(Y, axis=0, ddof=1) if replicates > 1 else np.zeros(len(keys))
     sim_sd = misfit.dem_noise_sd / np.sqrt(np.maximum(n_ok, 1))
     z = np.where(n_ok > 0, misfit.z(np.nan_to_num(mean), sim_sd), np.nan)
-    return Confirmation(params, int(replicates), mean, spread, n_ok, z)
+    return Confirmation(params, int(replicates), mean, spread, n_ok, z, np.array(x, float), np.array(Y, float))
+
+
+@dataclass(frozen=True)
+class SurrogateCheck:
+    """The surrogate's prediction at the best fit against the DEM confirmation there, per observable.
+
+    disagreement : ``|DEM mean - surrogate mean| / sqrt(sd_surrogate^2 + s_DEM^2 / n_runs)`` (censored
+        observables: both values raised to the detection limit first, where every value below it is
+        the same "no pile"); NaN where every confirmation run failed.
+    z_surrogate, z_dem : residuals against the measurements from the surrogate and from the DEM.
+    disagreeing : keys where the DEM contradicts the surrogate: a disagreement beyond ``cutoff``
+        (3: as unlikely as an implausible point; 2 would flag one of 7 honest observables in about
+        a quarter of the checks), or the DEM beyond ``within_sigma`` where the surrogate said within,
+        by more than ``within_sigma`` combined sd (the verdict would rest on a wrong prediction).
+    """
+
+    keys: tuple[str, ...]
+    disagreement: np.ndarray
+    z_surrogate: np.ndarray
+    z_dem: np.ndarray
+    disagreeing: tuple[str, ...]
+    within_sigma: float
+
+    @property
+    def agrees(self) -> bool:
+        return not self.disagreeing
+
+    @property
+    def max_disagreement(self) -> float:
+        d = self.disagreement[np.isfinite(self.disagreement)]
+        return float(np.max(d)) if d.size else float("nan")
+
+    @property
+    def max_abs_z_dem(self) -> float:
+        z = self.z_dem[np.isfinite(self.z_dem)]
+        return float(np.max(np.abs(z))) if z.size else float("nan")
+
+    @property
+    def dem_within(self) -> bool:
+        """Every observable within ``within_sigma`` by the DEM (then a better surrogate changes nothing)."""
+        return bool(np.all(np.abs(self.z_dem) <= self.within_sigma))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"agrees": self.agrees, "disagreeing": list(self.disagreeing),
+                "max_disagreement": self.max_disagreement, "max_abs_z_dem": self.max_abs_z_dem,
+                "dem_within": self.dem_within, "disagreement": self.disagreement.tolist(),
+                "z_surrogate": self.z_surrogate.tolist(), "z_dem": self.z_dem.tolist()}
+
+
+def check_surrogate(misfit: Misfit, best: BestFit, confirmation: Confirmation,
+                    settings: DiagnosisSettings) -> SurrogateCheck:
+    """Compare the surrogate at ``best`` with the DEM ``confirmation`` there (:class:`SurrogateCheck`)."""
+    obs = misfit.observations
+    limit = np.where(obs.censored, obs.means, -np.inf)
+    sur, dem = np.maximum(best.mu, limit), np.maximum(confirmation.mean, limit)
+    n = np.maximum(confirmation.n_ok, 1)
+    sd = np.sqrt(best.sd ** 2 + misfit.dem_noise_sd ** 2 / n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(confirmation.n_ok > 0, np.abs(dem - sur) / sd, np.nan)
+        d = np.where((sd == 0) & (dem == sur), 0.0, d)
+    w = settings.within_sigma
+    flipped = (np.abs(confirmation.z) > w) & (np.abs(best.z) <= w) & (d > w)
+    bad = (d > settings.cutoff) | flipped
+    keys = obs.keys
+    return SurrogateCheck(tuple(keys), d, np.array(best.z, float), np.array(confirmation.z, float),
+                          tuple(k for k, b in zip(keys, bad) if b), float(w))
+
+
+@dataclass(frozen=True)
+class RefinementWave:
+    """One history-matching wave: what joined the design, and the refit's check at its best fit.
+
+    wave : the study's wave number after it (the first design is wave 1).
+    new_sets : maximin sets placed in the non-implausible region.
+    confirmation_sets : earlier DEM confirmations (runs at earlier best fits) that joined the design.
+    design_sets : parameter sets in the design after the wave.
+    """
+
+    wave: int
+    new_sets: int
+    confirmation_sets: int
+    design_sets: int
+    best_parameters: dict[str, float]
+    check: SurrogateCheck
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"wave": self.wave, "new_sets": self.new_sets, "confirmation_sets": self.confirmation_sets,
+                "design_sets": self.design_sets, "best_parameters": self.best_parameters,
+                "agrees": self.check.agrees, "disagreeing": list(self.check.disagreeing),
+                "max_disagreement": self.check.max_disagreement, "max_abs_z_dem": self.check.max_abs_z_dem}
 
 
 @dataclass
@@ -85,6 +191,8 @@ class ModelStudy:
     confirmation: Confirmation
     seconds: float
     waves: int = 1
+    check: SurrogateCheck | None = None
+    refinement: tuple[RefinementWave, ...] = ()
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -131,7 +239,9 @@ class ModelStudy:
                          "log_likelihood": self.best.log_likelihood, "z": self.best.z.tolist()},
             "comparison": self.comparison_rows(), "adequacy": self.adequacy.to_dict(),
             "evidence": self.evidence.to_dict(), "information_criteria": self.information_criteria(),
-            "confirmation": self.confirmation.to_dict(), "seconds": self.seconds,
+            "confirmation": self.confirmation.to_dict(),
+            "surrogate_check": None if self.check is None else self.check.to_dict(),
+            "refinement": [w.to_dict() for w in self.refinement], "seconds": self.seconds,
         }
 
 
@@ -165,8 +275,9 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
 
     evidence = estimate_log_evidence(log_likelihood, best.u, settings.evidence_samples, seed)
     confirmation = confirm(version, best.x, runner, misfit, settings.confirm_replicates)
+    check = check_surrogate(misfit, best, confirmation, settings)
     return ModelStudy(version, design, noise_sd, noise_dof, misfit, surrogates, scan, best, adequacy, evidence,
-                      confirmation, time.perf_counter() - t0, waves)
+                      confirmation, time.perf_counter() - t0, waves, check)
 
 
 def _maximin_subset(U: np.ndarray, n: int, first: np.ndarray) -> np.ndarray:
@@ -181,21 +292,61 @@ def _maximin_subset(U: np.ndarray, n: int, first: np.ndarray) -> np.ndarray:
 
 
 def refine_study(study: ModelStudy, observations: Observations, runner: ForwardRunner,
-                 settings: DiagnosisSettings, seed: int, noise: tuple[np.ndarray, np.ndarray] | None = None
-                 ) -> ModelStudy:
-    """A second history-matching wave: ``refine_points`` new sets spread (maximin) over the
-    non-implausible part of the scan (or the lowest-implausibility 2 % if it is empty), then the
-    whole study is redone on the joined design."""
+                 settings: DiagnosisSettings, seed: int, noise: tuple[np.ndarray, np.ndarray] | None = None,
+                 first_wave_unconditional: bool = True, say: Callable[[str], None] | None = None) -> ModelStudy:
+    """History-matching waves until the DEM at the best fit agrees with the surrogate there.
+
+    A wave places ``refine_points`` new sets (maximin) in the non-implausible part of the scan (or
+    its lowest-implausibility 2 % if that is too small), joins the DEM confirmations of earlier
+    best fits that are not in the design yet, and redoes the whole study on the joined design
+    (refit, re-optimise, re-confirm).  The loop stops when the new study's :class:`SurrogateCheck`
+    agrees, or the DEM already puts every observable within ``within_sigma``, or after the limit.
+
+    first_wave_unconditional : True (the recalibration of a chosen effect): the first wave always
+        runs, without the confirmation (it is the single wave of the diagnosis before this loop),
+        and up to ``max(1, max_refine_waves)`` waves run in all.  False (a study whose surrogate
+        is only doubted: the adequate base model): waves run only while the check disagrees, at
+        most ``max_refine_waves - 1`` of them, so 0 and 1 add none in either case.
+    say : progress callback, one line per wave.
+    Returns the last study, with ``refinement`` recording every wave; ``refine_points = 0``: ``study``.
+    """
     if settings.refine_points == 0:
         return study
-    mi = study.scan.max_implausibility
-    pool = study.scan.U[mi <= settings.cutoff]
-    if len(pool) < settings.refine_points:
-        pool = study.scan.U[np.argsort(mi)[:max(settings.refine_points * 4, len(mi) // 50)]]
-    U_new = _maximin_subset(pool, settings.refine_points, study.version.space.to_unit(study.design.X))
-    new = evaluate_sets(study.version, runner, observations.keys, study.version.space.from_unit(U_new),
-                        settings.replicates)
-    refined = study_model(study.version, observations, runner, settings, seed, study.design.extended(new),
-                          waves=study.waves + 1, noise=noise)
-    refined.seconds += study.seconds
-    return refined
+    t0 = time.perf_counter()
+    keys = observations.keys
+    version = study.version
+    limit = max(1, settings.max_refine_waves) if first_wave_unconditional else max(0, settings.max_refine_waves - 1)
+    current, pending, records = study, [study.confirmation], []
+    for k in range(limit):
+        unconditional = first_wave_unconditional and k == 0
+        if not unconditional and (current.check.agrees or current.check.dem_within):
+            break
+        design = current.design
+        joined = [] if unconditional else pending
+        for c in joined:
+            design = design.extended(c.as_design(keys))
+        mi = current.scan.max_implausibility
+        pool = current.scan.U[mi <= settings.cutoff]
+        if len(pool) < settings.refine_points:
+            pool = current.scan.U[np.argsort(mi)[:max(settings.refine_points * 4, len(mi) // 50)]]
+        U_new = _maximin_subset(pool, settings.refine_points, version.space.to_unit(design.X))
+        new = evaluate_sets(version, runner, keys, version.space.from_unit(U_new), settings.replicates)
+        refined = study_model(version, observations, runner, settings, seed + 7919 * k, design.extended(new),
+                              waves=current.waves + 1, noise=noise)
+        pending = (pending if unconditional else []) + [refined.confirmation]
+        records.append(RefinementWave(refined.waves, len(U_new), len(joined), len(refined.design.X),
+                                      refined.best_parameters, refined.check))
+        current = refined
+        if say is not None:
+            c = refined.check
+            state = ("agrees" if c.agrees else "DEM within every measurement" if c.dem_within
+                     else "disagrees" + ("" if k + 1 < limit else ": wave limit (max_refine_waves) reached"))
+            say(f"{version.name}: wave {refined.waves}: +{len(U_new)} sets, +{len(joined)} confirmation set(s), "
+                f"{len(refined.design.X)} in all; DEM vs surrogate at the best fit: largest disagreement "
+                f"{c.max_disagreement:.1f} sd{' (' + ', '.join(c.disagreeing) + ')' if c.disagreeing else ''}, "
+                f"largest |z| DEM {c.max_abs_z_dem:.1f}: {state}")
+    if current is study:
+        return study
+    current.refinement = study.refinement + tuple(records)
+    current.seconds = study.seconds + (time.perf_counter() - t0)
+    return current
