@@ -7,6 +7,9 @@ Data flows one way and every stage writes what it produced into the output folde
 ``samples.jsonl``           one line per (design sample, response) DEM result as it arrives;
                             an interrupted campaign resumes from it and loses nothing; failed
                             runs are kept with their error (never dropped silently)
+``runs.jsonl``              one line per DEM target, confirmation round and validation run, so
+                            that a re-run does not repeat them
+``sittings.json``           start and wall time of every sitting (the total is their sum)
 ``results.json``            every number: design, surrogate CV choice and held-out metrics,
                             NSGA-II Pareto set and compromise, acceptable set ranges, Sobol
                             indices, confirmation and validation runs with relative errors
@@ -16,17 +19,23 @@ Data flows one way and every stage writes what it produced into the output folde
                             chosen design samples, targets, confirmation and validation runs
 ==========================  ===================================================================
 
+Every record carries a fingerprint of what determines it (parameters, experiment and settings,
+material, contact law, plugins, fixed parameters, fills, code version: :mod:`calibration.campaign_records`);
+a resume refuses records whose setup differs from the config, naming the difference.
+
 The configuration (YAML/JSON) is documented in ``calibration/configs/quick_calibration.yaml``.
 """
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import sys
 import time
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import warp as wp
@@ -36,6 +45,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 import warpdem as wd
 from warpdem import ConfigError
 
+from .campaign_records import (RECORD_FORMAT, append_records, code_version, describe_differences, fingerprint,
+                               plain, plugin_hashes, read_records, write_atomic)
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
 from .experiments.common import _jsonable, cpu_processes
@@ -344,6 +355,21 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
     return out
 
 
+def _calls(n_sets: int, record: Mapping[int, Any]) -> list[tuple[int, int]]:
+    """How :func:`run_recorded` splits ``n_sets`` parameter sets into calls of
+    :func:`run_response`: ``(start, end)`` ranges; a set at a position in ``record`` runs alone."""
+    calls, k = [], 0
+    while k < n_sets:
+        if k in record:
+            calls.append((k, k + 1))
+            k += 1
+            continue
+        end = next((j for j in range(k, n_sets) if j in record), n_sets)
+        calls.append((k, end))
+        k = end
+    return calls
+
+
 def run_recorded(resp: Response, parameter_sets: list[dict[str, float]], cfg: CampaignConfig,
                  first_fill: int = 0, record: Mapping[int, Path] | None = None,
                  progress: bool = False) -> list[dict[str, Any]]:
@@ -351,29 +377,70 @@ def run_recorded(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
     batch of its own writing its VTK series into ``record[position]``; the other sets run in
     contiguous batches as before. Every set keeps its loose fills (with independent fills, the set
     at position k uses fills ``first_fill + k * replicates ...`` however the batch is split).
-    Records of recorded sets carry ``vtk``: the series' folder."""
+    Records of recorded sets carry ``vtk``: the series' folder; every record carries
+    ``dem_wall_share_s``, its share of its call's wall time [s] (their sum is the DEM time)."""
     record = {k: v for k, v in (record or {}).items() if 0 <= k < len(parameter_sets)}
-    if not record:
-        return run_response(resp, parameter_sets, cfg, progress=progress, first_fill=first_fill)
     r = resp.replicates
     out: list[dict[str, Any]] = []
-    k = 0
-    while k < len(parameter_sets):
-        if k in record:
-            recs = run_response(resp, parameter_sets[k:k + 1], cfg, progress=progress, first_fill=first_fill + k * r,
-                                vtk_folder=record[k])
-            out += [dict(rec, vtk=str(record[k])) for rec in recs]
-            k += 1
-            continue
-        end = next((j for j in range(k, len(parameter_sets)) if j in record), len(parameter_sets))
-        out += run_response(resp, parameter_sets[k:end], cfg, progress=progress, first_fill=first_fill + k * r)
-        k = end
+    for start, end in _calls(len(parameter_sets), record):
+        if start in record:
+            recs = run_response(resp, parameter_sets[start:end], cfg, progress=progress,
+                                first_fill=first_fill + start * r, vtk_folder=record[start])
+            recs = [dict(rec, vtk=str(record[start])) for rec in recs]
+        else:
+            recs = run_response(resp, parameter_sets[start:end], cfg, progress=progress, first_fill=first_fill + start * r)
+        out += [dict(rec, dem_wall_share_s=round(float(rec.get("wall_s") or 0.0) / (end - start), 3)) for rec in recs]
     return out
 
 
-def resolve_target(resp: Response, cfg: CampaignConfig, log, vtk_folder: Path | None = None) -> None:
+def planned_fills(cfg: CampaignConfig, resp: Response, n_sets: int, first_fill: int = 0,
+                  record: Mapping[int, Any] | None = None) -> list[list[int] | str]:
+    """The loose-fill indices each of ``n_sets`` parameter sets gets from :func:`run_recorded`
+    (world fills are seeded by the experiment's ``seed`` setting and the index). Independent
+    fills: set k uses ``first_fill + k * replicates + j``. Shared fills: one fill per call
+    (``"shared"``), or with replicates fill ``w`` for world ``w`` of its call."""
+    r = resp.replicates
+    if cfg.fills == "independent":
+        return [[first_fill + k * r + j for j in range(r)] for k in range(n_sets)]
+    if r == 1:
+        return ["shared"] * n_sets
+    rec = {k: None for k in (record or {}) if 0 <= k < n_sets}
+    return [[(k - start) * r + j for j in range(r)] for start, end in _calls(n_sets, rec) for k in range(start, end)]
+
+
+def setup_components(cfg: CampaignConfig, resp: Response) -> dict[str, Any]:
+    """What determines every DEM result of ``resp`` in this campaign except the parameter values
+    and fill indices (the ``setup`` part of a record's fingerprint: :mod:`calibration.campaign_records`)."""
+    law = cfg.model.contact_law
+    return plain({
+        "format": RECORD_FORMAT,
+        "experiment": dict(name=resp.experiment, scale=resp.scale, settings=plain(resp.settings, numbers_as_float=True),
+                           replicates=resp.replicates),
+        "material": ("the experiment's scale default" if cfg.model.material is None
+                     else plain(cfg.model.material.describe(), numbers_as_float=True)),
+        "contact_law": law.describe() + ("" if law.track_wear else "+track_wear:off"),
+        "plugins": plugin_hashes(cfg.model.plugins, law),
+        "fixed": plain(cfg.fixed, numbers_as_float=True),
+        "fills": cfg.fills,
+        "code": code_version(),
+    })
+
+
+def determined_by(cfg: CampaignConfig, resp: Response, parameters: Any, fills: Any) -> dict[str, Any]:
+    """A record's ``determined_by``: the response's setup and this record's point (parameter
+    values, one mapping or a list of them, and loose-fill indices)."""
+    return {"setup": setup_components(cfg, resp), "point": plain({"parameters": parameters, "fills": fills})}
+
+
+RunGroup = Callable[[Response, list[dict[str, float]], int, "Mapping[int, Path] | None"], list[dict[str, Any]]]
+
+
+def resolve_target(resp: Response, cfg: CampaignConfig, log, vtk_folder: Path | None = None,
+                   run: RunGroup | None = None) -> None:
     """Fill ``resp.target_deg`` from a number, a measurement file, or a DEM run at known parameters
-    (``vtk_folder``: the first of those runs writes its VTK series there)."""
+    (``vtk_folder``: the first of those runs writes its VTK series there). ``run(resp,
+    parameter_sets, first_fill, record)`` runs the DEM (default :func:`run_recorded`; a campaign
+    passes one that records the runs and reuses a recorded one)."""
     t = resp.target
     if t is None:
         raise ConfigError(f"response '{resp.name}': no target given")
@@ -402,12 +469,15 @@ def resolve_target(resp: Response, cfg: CampaignConfig, log, vtk_folder: Path | 
         if runs < 1:
             raise ConfigError(f"response '{resp.name}': target runs must be >= 1, got {runs}")
         log(f"target '{resp.name}': DEM at known parameters {truth}, {runs} run(s) x {resp.replicates} fill(s)")
-        recs = run_recorded(resp, [truth] * runs, cfg, first_fill=TARGET_FILLS,
-                            record={0: vtk_folder} if vtk_folder is not None else None)
+        if run is None:
+            def run(resp_, sets, first_fill, record):
+                return run_recorded(resp_, sets, cfg, first_fill=first_fill, record=record)
+        recs = run(resp, [truth] * runs, TARGET_FILLS, {0: vtk_folder} if vtk_folder is not None else None)
         angles = [a for rec in recs if rec["status"] == "ok" for a in rec["replicate_angles_deg"]]
         if len(angles) < runs * resp.replicates:
             errs = "; ".join(str(rec["error"]) for rec in recs if rec["error"])
-            raise ConfigError(f"response '{resp.name}': a DEM run producing the target failed: {errs}")
+            raise ConfigError(f"response '{resp.name}': a DEM run producing the target failed: {errs} (recorded; "
+                              "--retry-failed runs it again)")
         resp.target_deg = float(np.mean(angles))
         resp.target_std_deg = float(np.std(angles, ddof=1)) if len(angles) > 1 else None
         resp.target_source = f"DEM at {truth}, mean of {len(angles)} loose fill(s)"
@@ -429,16 +499,39 @@ def _fill_contiguous_batches(indices: Sequence[int], size: int) -> list[list[int
 
 
 # ----------------------------------------------------------------------------- the campaign
-class Campaign:
-    """Runs a :class:`CampaignConfig` end to end, resumably, into ``output``."""
+NEW_FOLDER_HINT = ("Run into a new output folder (--out NEW_DIR, or --new-folder to use the first of <output>-2, "
+                   "<output>-3, ... whose records fit); the records here are left as they are.")
 
-    def __init__(self, cfg: CampaignConfig, output: str | os.PathLike | None = None, verbose: bool = True) -> None:
+
+def _record_label(rec: Mapping[str, Any]) -> str:
+    if "index" in rec:
+        return f"sample {rec['index']} of response '{rec.get('response')}'"
+    return f"{rec.get('kind', 'run')} of response '{rec.get('response')}'"
+
+
+class Campaign:
+    """Runs a :class:`CampaignConfig` end to end, resumably, into ``output``.
+
+    ``retry_failed``: run again the design samples and the targets / confirmation / validation
+    runs recorded as failed (their old records stay; the newest is used)."""
+
+    def __init__(self, cfg: CampaignConfig, output: str | os.PathLike | None = None, verbose: bool = True,
+                 retry_failed: bool = False) -> None:
         self.cfg = cfg
         self.out = Path(output or cfg.output)
         self.out.mkdir(parents=True, exist_ok=True)
         self.verbose = verbose
+        self.retry_failed = retry_failed
         self.samples_path = self.out / "samples.jsonl"
+        self.runs_path = self.out / "runs.jsonl"
+        self.sittings_path = self.out / "sittings.json"
         self.refine_rounds = cfg.refine_rounds
+        # this sitting: written into sittings.json with its wall time after every record
+        self.sitting_id = f"{time.strftime('%Y%m%dT%H%M%S')}-{uuid.uuid4().hex[:6]}"
+        self._sitting_t0 = time.perf_counter()
+        self._sitting_started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        self._sample_records: list[dict[str, Any]] = []  # every line of samples.jsonl, in order
+        self._run_records: list[dict[str, Any]] = []     # every line of runs.jsonl, in order
 
     def vtk_folder(self, kind: str, response: str) -> Path:
         """Folder of one run's VTK series: ``<output>/<vtk.folder>/<kind>/<response>`` (kind e.g.
@@ -453,26 +546,59 @@ class Campaign:
     def design(self) -> np.ndarray:
         return latin_hypercube(self.cfg.space, self.cfg.samples, seed=self.cfg.seed)
 
+    # ------------------------------------------------------------------ records
+    def _read(self) -> tuple[list[tuple[int, dict]], list[tuple[int, dict]]]:
+        """Both record files as ``(line number, record)``; a torn last line is cut off (logged)."""
+        samples = read_records(self.samples_path, self.log)
+        runs = read_records(self.runs_path, self.log)
+        self._sample_records = [rec for _, rec in samples]
+        self._run_records = [rec for _, rec in runs]
+        return samples, runs
+
     def _done(self) -> dict[tuple[int, str], dict]:
-        done: dict[tuple[int, str], dict] = {}
-        if self.samples_path.exists():
-            lines = self.samples_path.read_text().splitlines()
-            for k, line in enumerate(lines):
-                if not line.strip():
+        """The newest record of every (design sample, response) in ``samples.jsonl``."""
+        samples, _ = self._read()
+        return {(rec["index"], rec["response"]): rec for _, rec in samples}
+
+    def _responses_by_name(self) -> dict[str, Response]:
+        return {r.name: r for r in self.cfg.responses + ([self.cfg.validation] if self.cfg.validation else [])}
+
+    def check_records(self) -> dict[tuple[int, str], dict]:
+        """Read ``samples.jsonl`` and ``runs.jsonl`` and refuse (ConfigError) to reuse records that
+        do not belong to this config: a record without a fingerprint (record format 1), a record
+        whose fingerprint does not match its contents (edited or damaged), a record whose setup
+        (experiment and settings, material, contact law, plugins, fixed parameters, fill mode,
+        code version) differs from this config's (every difference named, recorded vs config), or
+        design samples of another design (:meth:`_check_records_match_design`). Returns the newest
+        record of every (design sample, response)."""
+        samples, runs = self._read()
+        setups = {name: setup_components(self.cfg, resp) for name, resp in self._responses_by_name().items()}
+        differences: dict[str, set[str]] = {}
+        for path, lines in ((self.samples_path, samples), (self.runs_path, runs)):
+            for line_no, rec in lines:
+                where = f"{path}: line {line_no} ({_record_label(rec)})"
+                if "fingerprint" not in rec or not isinstance(rec.get("determined_by"), Mapping):
+                    raise ConfigError(f"{where} has no fingerprint: it was written by a warpdem that did not record "
+                                      "what determines a result (record format 1), so it cannot be checked against "
+                                      f"this config and is not reused. {NEW_FOLDER_HINT}")
+                if fingerprint(rec["determined_by"]) != rec["fingerprint"]:
+                    raise ConfigError(f"{where}: its fingerprint does not match what it records as determining it; "
+                                      f"the file was edited or damaged. {NEW_FOLDER_HINT}")
+                name = rec.get("response")
+                if name not in setups:  # samples: named by the design check; runs: not used
                     continue
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:
-                    if k == len(lines) - 1:  # torn by an interrupted write: cut it off, that sample runs again
-                        self.log(f"{self.samples_path}: last line is incomplete (interrupted write); "
-                                 "its sample will run again")
-                        tmp = self.samples_path.with_suffix(".jsonl.tmp")
-                        tmp.write_text("".join(ln + "\n" for ln in lines[:k]))
-                        os.replace(tmp, self.samples_path)
-                        continue
-                    raise ConfigError(f"{self.samples_path}: line {k + 1} is not valid JSON; the record file is "
-                                      "damaged (move it away to start the campaign afresh)") from None
-                done[(rec["index"], rec["response"])] = rec
+                for line in describe_differences(rec["determined_by"].get("setup") or {}, setups[name]):
+                    differences.setdefault(line, set()).add(name)
+        if differences:
+            lines = []
+            for line, names in differences.items():
+                lines.append(f"  response(s) {', '.join(sorted(names))}: {line}" if line.startswith("experiment ")
+                             else f"  {line}")
+            raise ConfigError(f"{self.out}: the records here were made with another setup than this config, so a "
+                              f"resume would mix their results with new ones:\n" + "\n".join(sorted(set(lines))) +
+                              f"\n{NEW_FOLDER_HINT}")
+        done = {(rec["index"], rec["response"]): rec for _, rec in samples}
+        self._check_records_match_design(done, self.design(), [p.name for p in self.cfg.space.parameters])
         return done
 
     def _check_records_match_design(self, done: Mapping[tuple[int, str], dict], X: np.ndarray,
@@ -496,6 +622,68 @@ class Campaign:
                                       "design changed (range, seed or sample count) since these records were "
                                       "made: use a new output folder (--out) or delete samples.jsonl")
 
+    def sample_record(self, resp: Response, index: int, parameters: Mapping[str, float], fills: Any,
+                      result: Mapping[str, Any]) -> dict[str, Any]:
+        """The ``samples.jsonl`` record of design sample ``index`` of ``resp``: the DEM result,
+        the parameter values, the device, the sitting, ``determined_by`` and ``fingerprint``."""
+        by = determined_by(self.cfg, resp, dict(parameters), fills)
+        rec = dict(index=int(index), response=resp.name, parameters=dict(parameters), **result)
+        if rec.get("vtk"):  # the series' folder, relative to the output folder
+            rec["vtk"] = os.path.relpath(rec["vtk"], self.out)
+        rec.update(device=str(self.cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")),
+                   sitting=self.sitting_id, determined_by=by, fingerprint=fingerprint(by))
+        return plain(rec)
+
+    def run_group(self, kind: str, resp: Response, parameter_sets: list[dict[str, float]], first_fill: int,
+                  record: Mapping[int, Path] | None = None, round_: int = 0) -> list[dict[str, Any]]:
+        """:func:`run_recorded` for a DEM target, a confirmation round or the validation
+        (``kind``), recorded in ``runs.jsonl``: a run recorded with the same fingerprint (same
+        setup, parameter sets and fills) is returned instead of run again (a failed one too,
+        unless ``retry_failed``). A recorded run writes no VTK series."""
+        fills = planned_fills(self.cfg, resp, len(parameter_sets), first_fill, record)
+        by = determined_by(self.cfg, resp, [dict(p) for p in parameter_sets], fills)
+        fp = fingerprint(by)
+        for rec in reversed(self._run_records):
+            if rec.get("kind") == kind and rec.get("response") == resp.name and rec.get("fingerprint") == fp:
+                if self.retry_failed and any(r.get("status") != "ok" for r in rec["results"]):
+                    break
+                self.log(f"{kind} {resp.name}: recorded in {self.runs_path.name} (sitting {rec.get('sitting')}), "
+                         "not run again")
+                return rec["results"]
+        results = run_recorded(resp, parameter_sets, self.cfg, first_fill=first_fill, record=record)
+        results = [dict(r, vtk=os.path.relpath(r["vtk"], self.out)) if r.get("vtk") else r for r in results]
+        rec = plain(dict(kind=kind, response=resp.name, round=round_, parameter_sets=parameter_sets, results=results,
+                         device=str(self.cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")),
+                         sitting=self.sitting_id, determined_by=by, fingerprint=fp))
+        append_records(self.runs_path, [rec])
+        self._run_records.append(rec)
+        self.note_sitting()
+        return rec["results"]
+
+    # ------------------------------------------------------------------ wall time over sittings
+    def _sittings(self) -> list[dict[str, Any]]:
+        """The sittings recorded in ``sittings.json`` other than this one."""
+        if not self.sittings_path.exists():
+            return []
+        try:
+            items = json.loads(self.sittings_path.read_text())
+            assert isinstance(items, list) and all(isinstance(x, dict) and "wall_s" in x for x in items)
+        except (ValueError, AssertionError):
+            kept = self.sittings_path.with_name(self.sittings_path.name + ".damaged")
+            os.replace(self.sittings_path, kept)
+            self.log(f"{self.sittings_path}: unreadable, moved to {kept.name}; the total wall time counts this "
+                     "sitting on")
+            return []
+        return [x for x in items if x.get("id") != self.sitting_id]
+
+    def note_sitting(self, finished: bool = False) -> list[dict[str, Any]]:
+        """Write this sitting's wall time so far [s] into ``sittings.json`` (atomically, after every
+        record, so a killed sitting counts up to its last record); returns every sitting."""
+        me = dict(id=self.sitting_id, started=self._sitting_started, wall_s=round(time.perf_counter() - self._sitting_t0, 1), finished=finished)
+        items = self._sittings() + [me]
+        write_atomic(self.sittings_path, json.dumps(items, indent=1) + "\n")
+        return items
+
     def run_design(self, progress: bool = True, max_samples: int | None = None,
                    retry_failed: bool = False, responses: Sequence[str] | None = None) -> dict[tuple[int, str], dict]:
         """Run every (sample, response) not yet in ``samples.jsonl``, batch by batch.
@@ -503,12 +691,12 @@ class Campaign:
         ``max_samples``: run at most this many new design samples per response in this call (a
         campaign too long for one sitting is run in parts; ``samples.jsonl`` keeps every part).
         ``retry_failed``: run failed samples again (their old records stay in the file; the
-        newest record of a sample is the one used). ``responses``: run only these responses."""
+        newest record of a sample is the one used). ``responses``: run only these responses.
+        Records of another setup or design are refused first (:meth:`check_records`)."""
         X = self.design()
         names = [p.name for p in self.cfg.space.parameters]
-        done = self._done()
-        self._check_records_match_design(done, X, names)
-        if retry_failed:
+        done = self.check_records()
+        if retry_failed or self.retry_failed:
             done = {k: r for k, r in done.items() if r["status"] == "ok"}
         if max_samples is not None and max_samples < 1:
             raise ConfigError(f"max_samples must be >= 1, got {max_samples}")
@@ -539,14 +727,15 @@ class Campaign:
                 sets = [dict(zip(names, map(float, X[i]))) for i in batch]
                 # world k of the batch uses fill (batch[0] + k) * replicates + j: sample i's own fills
                 record = {k: self.vtk_folder(f"sample_{i:03d}", resp.name) for k, i in enumerate(batch) if i in wanted}
-                records = run_recorded(resp, sets, self.cfg, first_fill=batch[0] * resp.replicates, record=record)
-                with open(self.samples_path, "a") as fh:
-                    for i, p, rec in zip(batch, sets, records):
-                        rec = dict(index=i, response=resp.name, parameters=p, **rec)
-                        if rec.get("vtk"):  # the series' folder, relative to the output folder
-                            rec["vtk"] = os.path.relpath(rec["vtk"], self.out)
-                        fh.write(json.dumps(rec) + "\n")
-                        done[(i, resp.name)] = rec
+                first_fill = batch[0] * resp.replicates
+                fills = planned_fills(self.cfg, resp, len(batch), first_fill, record)
+                results = run_recorded(resp, sets, self.cfg, first_fill=first_fill, record=record)
+                new = [self.sample_record(resp, i, p, f, res) for i, p, f, res in zip(batch, sets, fills, results)]
+                append_records(self.samples_path, new)  # whole lines, flushed and fsynced
+                for rec in new:
+                    done[(rec["index"], resp.name)] = rec
+                self._sample_records += new
+                self.note_sitting()
                 if bar is not None:
                     bar.update(len(batch))
             if bar is not None:
@@ -566,18 +755,25 @@ class Campaign:
         res: dict[str, Any] = dict(name=cfg.name, parameters=pnames, fixed=cfg.fixed,
                                    model=cfg.model.describe(), contact_law=cfg.model.contact_law.describe(),
                                    device=str(cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")))
+        self.check_records()  # records of another setup or design: refused before any DEM runs
+
+        def run_target(resp_: Response, sets: list[dict[str, float]], first_fill: int,
+                       record: Mapping[int, Path] | None) -> list[dict[str, Any]]:
+            return self.run_group("target", resp_, sets, first_fill, record)
+
         for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
             resolve_target(resp, cfg, self.log, vtk_folder=self.vtk_folder("target", resp.name)
-                           if cfg.vtk is not None and cfg.vtk.targets else None)
+                           if cfg.vtk is not None and cfg.vtk.targets else None, run=run_target)
             self.log(f"target {resp.name} = {resp.target_deg:.3f} deg ({resp.target_source})")
         res["targets"] = {r.name: dict(deg=r.target_deg, std_deg=r.target_std_deg, source=r.target_source)
                           for r in cfg.responses + ([cfg.validation] if cfg.validation else [])}
         t0 = time.perf_counter()
         done = self.run_design(progress)
-        res["campaign_wall_s"] = round(time.perf_counter() - t0, 1)
-        # DEM time of the design over every session (a resumed campaign ran part of it before)
-        batches = {(r["response"], r.get("wall_s"), r.get("worlds")) for r in done.values() if r.get("wall_s")}
-        res["design_dem_wall_s_all_sessions"] = round(sum(b[1] for b in batches), 1)
+        res["campaign_wall_s"] = round(time.perf_counter() - t0, 1)  # the design's part of this sitting
+        # DEM time of the design over every sitting (a resumed campaign ran part of it before),
+        # failed runs that were retried included
+        res["design_dem_wall_s_all_sessions"] = round(
+            sum(float(r.get("dem_wall_share_s") or 0.0) for r in self._sample_records), 1)
         X = self.design()
         rnames = [r.name for r in cfg.responses]
         Y = np.array([[done[(i, n)]["angle_deg"] if done[(i, n)]["status"] == "ok" else np.nan for n in rnames]
@@ -619,10 +815,10 @@ class Campaign:
             x_best = dict(zip(pnames, map(float, cal.compromise_x)))
             conf = {}
             for resp in cfg.responses:
-                recs = run_recorded(resp, [x_best] * cfg.confirmation_runs, cfg,
-                                    first_fill=CONFIRMATION_FILLS + 10_000 * rnd,
-                                    record={0: self.vtk_folder(f"confirmation_round{rnd}", resp.name)}
-                                    if cfg.vtk is not None and cfg.vtk.confirmation else None)
+                recs = self.run_group("confirmation", resp, [x_best] * cfg.confirmation_runs,
+                                      first_fill=CONFIRMATION_FILLS + 10_000 * rnd,
+                                      record={0: self.vtk_folder(f"confirmation_round{rnd}", resp.name)}
+                                      if cfg.vtk is not None and cfg.vtk.confirmation else None, round_=rnd)
                 angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
                 dem = float(np.mean(angles)) if angles else None
                 conf[resp.name] = dict(
@@ -656,9 +852,9 @@ class Campaign:
         plot_sensitivity(sob, path=str(self.out / "sensitivity.png"))
         if cfg.validation is not None:
             v = cfg.validation
-            recs = run_recorded(v, [rounds[-1]["parameters"]], cfg, first_fill=VALIDATION_FILLS,
-                                record={0: self.vtk_folder("validation", v.name)}
-                                if cfg.vtk is not None and cfg.vtk.validation else None)
+            recs = self.run_group("validation", v, [rounds[-1]["parameters"]], first_fill=VALIDATION_FILLS,
+                                  record={0: self.vtk_folder("validation", v.name)}
+                                  if cfg.vtk is not None and cfg.vtk.validation else None)
             angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
             dem = float(np.mean(angles)) if angles else None
             res["validation"] = dict(experiment=v.experiment, scale=v.scale, dem_deg=dem, measured_deg=v.target_deg,
@@ -670,9 +866,15 @@ class Campaign:
             root = self.out / cfg.vtk.folder
             res["vtk_series"] = sorted(str(p.parent.relative_to(self.out)) if p.is_relative_to(self.out) else str(p.parent)
                                        for p in root.glob("*/*/particles.pvd"))
-        res["wall_s"] = round(time.perf_counter() - t_start, 1)
-        (self.out / "results.json").write_text(json.dumps(_jsonable(res), indent=1))
-        (self.out / "summary.md").write_text(summary_markdown(res))
+        res["dem_wall_s_all_sittings"] = round(res["design_dem_wall_s_all_sessions"] + sum(
+            float(r.get("dem_wall_share_s") or 0.0) for rec in self._run_records for r in rec.get("results", [])), 1)
+        res["analysis_wall_s"] = round(time.perf_counter() - t_start, 1)  # this sitting's run(), targets included
+        sittings = self.note_sitting(finished=True)
+        res["wall_s_this_sitting"] = sittings[-1]["wall_s"]
+        res["wall_s"] = round(sum(float(x["wall_s"]) for x in sittings), 1)  # over every sitting [s]
+        res["sittings"] = len(sittings)
+        write_atomic(self.out / "results.json", json.dumps(_jsonable(res), indent=1))
+        write_atomic(self.out / "summary.md", summary_markdown(res))
         from .report_campaign import write_campaign_report
 
         write_campaign_report(_jsonable(res), self.out)  # report.html: verdict, warnings, figures
@@ -698,7 +900,7 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
     d = res["design"]
     lines += ["", f"## Design: {d['samples']} Latin hypercube samples ({d['held_out']} held out), "
               f"{len(d['failed'])} failed runs; design DEM time {res.get('design_dem_wall_s_all_sessions', '?')} s "
-              f"over all sessions ({res['campaign_wall_s']} s in this one)", ""]
+              f"over all sittings (this sitting's design part: {res['campaign_wall_s']} s)", ""]
     s = res["surrogate"]
     if "held_out" in s:
         r2 = np.atleast_1d(s["held_out"]["r2"])
@@ -733,8 +935,31 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
     if res.get("vtk_series"):
         lines += ["", "## VTK series (open the .pvd files in ParaView)", ""]
         lines += [f"- `{f}/particles.pvd` (and `wall_*.pvd`)" for f in res["vtk_series"]]
-    lines += ["", f"Total wall time {res['wall_s']} s.", ""]
+    if "sittings" in res:
+        lines += ["", f"Total wall time {res['wall_s']} s over {res['sittings']} sitting(s) "
+                  f"({res['wall_s_this_sitting']} s in this one); DEM time {res['dem_wall_s_all_sittings']} s.", ""]
+    else:
+        lines += ["", f"Total wall time {res['wall_s']} s.", ""]
     return "\n".join(lines)
+
+
+def first_fitting_folder(cfg: CampaignConfig, output: str | os.PathLike) -> Path:
+    """``output`` if it is new or its records fit ``cfg``, else the first of ``<output>-2``,
+    ``<output>-3``, ... that is (``warpdem calibrate --new-folder``: a changed config goes on in
+    its own folder, and running it again resumes there)."""
+    base = Path(output)
+    for k in itertools.count(1):
+        folder = base if k == 1 else base.with_name(f"{base.name}-{k}")
+        if not folder.exists():
+            return folder
+        try:
+            Campaign(cfg, folder, verbose=False).check_records()
+        except ConfigError as exc:
+            print(f"warpdem calibrate: {folder} holds records of another setup or design "
+                  f"({str(exc).splitlines()[0][:200]}...); trying {base.name}-{k + 1}", file=sys.stderr)
+            continue
+        return folder
+    raise AssertionError("unreachable")
 
 
 def calibrate_main(argv: Sequence[str] | None = None) -> int:
@@ -753,6 +978,9 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--max-samples", type=int, default=None,
                     help="run at most N new design samples per response, then stop before the analysis "
                          "(run the command again to continue; nothing already run is repeated)")
+    ap.add_argument("--new-folder", action="store_true",
+                    help="if the output folder holds records of another setup or design, use the first of "
+                         "<output>-2, <output>-3, ... that is new or whose records fit this config")
     args = ap.parse_args(argv)
     if args.only is not None and args.max_samples is None:
         ap.error("--only needs --max-samples (the analysis uses every response)")
@@ -767,7 +995,10 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
             return 2
         cfg.device = args.device
     try:
-        campaign = Campaign(cfg, args.out)
+        out = Path(args.out or cfg.output)
+        if args.new_folder:
+            out = first_fitting_folder(cfg, out)
+        campaign = Campaign(cfg, out, retry_failed=args.retry_failed)
         if args.max_samples is not None:
             t0 = time.perf_counter()
             done = campaign.run_design(progress=not args.no_progress, max_samples=args.max_samples,
@@ -778,8 +1009,6 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
                 campaign.log(f"{resp.name}: {len(recs)} of {cfg.samples} samples done ({ok} ok)")
             campaign.log(f"part finished in {time.perf_counter() - t0:.1f} s; run again to continue")
             return 0
-        if args.retry_failed:
-            campaign.run_design(progress=not args.no_progress, retry_failed=True)
         campaign.run(progress=not args.no_progress)
         return 0
     except ConfigError as exc:  # e.g. records of another design in the output folder

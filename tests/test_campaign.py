@@ -91,11 +91,14 @@ def test_target_design_confirmation_and_validation_never_share_a_fill(tmp_path, 
     # a resumed design with gaps: each remaining sample still gets its own fill (fill i for sample i)
     out = tmp_path / "resumed"
     out.mkdir()
-    X = cp.Campaign(cfg, out, verbose=False).design()
+    camp = cp.Campaign(cfg, out, verbose=False)
+    X = camp.design()
     names = [p.name for p in cfg.space.parameters]
-    pre = [json.dumps(dict(index=i, response=n, parameters={k: float(v) for k, v in zip(names, X[i])}, status="ok",
-                           error=None, angle_deg=30.0,
-                           replicate_angles_deg=[30.0] * (2 if n == "alpha" else 1)))
+    resp = {r.name: r for r in cfg.responses}
+    pre = [json.dumps(camp.sample_record(resp[n], i, {k: float(v) for k, v in zip(names, X[i])},
+                                         cp.planned_fills(cfg, resp[n], 1, i * resp[n].replicates)[0],
+                                         dict(status="ok", error=None, angle_deg=30.0,
+                                              replicate_angles_deg=[30.0] * resp[n].replicates)))
            for i in (1, 2, 5) for n in ("alpha", "beta")]
     (out / "samples.jsonl").write_text("\n".join(pre) + "\n")
     fake_dem.clear()
