@@ -39,12 +39,13 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
     if not p.is_file():
         raise ConfigError(f"experiment config {str(p)!r} does not exist")
     text = p.read_text()
-    if p.suffix.lower() == ".json":
-        cfg = json.loads(text)
-    else:
-        import yaml
+    import yaml
 
-        cfg = yaml.safe_load(text)
+    try:
+        cfg = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{p}: not valid {'JSON' if p.suffix.lower() == '.json' else 'YAML'}: "
+                          f"{' '.join(str(exc).split())}") from None
     cfg = check_config(cfg, str(p))
     cfg["_base_dir"] = str(p.parent)
     return cfg

@@ -62,8 +62,11 @@ def normalize_parameter_sets(parameter_sets: Sequence[Mapping[str, float]] | Map
     scalars (one world). Names must be among ``parameter_names`` (the model's contact law)."""
     if isinstance(parameter_sets, Mapping):
         if not parameter_sets:
-            raise ConfigError("parameter sets: empty mapping; give at least one world")
-        arrays = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in parameter_sets.items()}
+            raise ConfigError("parameter sets ('parameters'): empty mapping; give at least one world")
+        try:
+            arrays = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in parameter_sets.items()}
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f"parameter sets: every value must be a number or a list of numbers ({exc})") from None
         lengths = {k: a.size for k, a in arrays.items()}
         if len(set(lengths.values())) != 1:
             raise ConfigError(f"parameter sets: arrays differ in length {lengths}")
@@ -72,15 +75,19 @@ def normalize_parameter_sets(parameter_sets: Sequence[Mapping[str, float]] | Map
     else:
         sets = [dict(s) for s in parameter_sets]
         if not sets:
-            raise ConfigError("parameter sets: empty list; give at least one world (an empty dict uses defaults)")
+            raise ConfigError("parameter sets ('parameters'): empty list; give at least one world (an empty dict uses defaults)")
     valid = list(parameter_names)
     for w, s in enumerate(sets):
         for k, v in s.items():
             if k not in valid:
                 raise ConfigError(f"parameter set {w}: unknown contact parameter '{k}'; this contact law has {valid}")
-            if not math.isfinite(float(v)):
+            try:
+                value = float(v)
+            except (TypeError, ValueError):
+                raise ConfigError(f"parameter set {w}: '{k}' must be a number, got {v!r}") from None
+            if not math.isfinite(value):
                 raise ConfigError(f"parameter set {w}: '{k}' must be finite, got {v}")
-            s[k] = float(v)
+            s[k] = value
     return sets
 
 

@@ -16,9 +16,10 @@ import json
 import math
 import os
 import sys
+from pathlib import Path
 from typing import Any, Sequence
 
-from .errors import MeasurementError
+from .errors import MeasurementError, MeasurementFileError
 
 _VIDEO_EXT = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".wmv", ".mpg", ".mpeg")
 
@@ -228,14 +229,23 @@ def _run(a: argparse.Namespace) -> dict:
 
 def measure_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``warpdem measure``. Prints JSON to stdout; returns the
-    exit status (0 ok, 1 measurement error, 2 usage error)."""
+    exit status (0 ok, 1 the angle could not be measured, 2 usage error: bad argument, missing or
+    malformed input file)."""
     parser = _parser()
     try:
         a = parser.parse_args(list(argv) if argv is not None else None)
     except SystemExit as e:  # argparse usage error or --help
         return int(e.code or 0)
+    for given in (a.source, a.file):
+        if given is not None and not Path(given).is_file():
+            print(f"warpdem measure: no such file: {given!r}", file=sys.stderr)
+            return 2
     try:
         out = _clean(_run(a))
+    except MeasurementFileError as e:  # the user's file is malformed: a usage error, not a failed measurement
+        print(json.dumps({"error": str(e)}), file=sys.stdout)
+        print(f"warpdem measure: {e}", file=sys.stderr)
+        return 2
     except MeasurementError as e:
         print(json.dumps({"error": str(e)}), file=sys.stdout)
         print(f"warpdem measure: {e}", file=sys.stderr)
