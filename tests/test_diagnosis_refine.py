@@ -184,7 +184,15 @@ def test_waves_stop_at_the_limit_and_the_verdict_says_the_surrogate_still_disagr
     assert "t/three" in step and "add design points" in step
     # the misfit left there is not blamed on the effect
     assert not any(s.startswith("Still beyond") and "t/three" in s for s in r.next_steps)
-    assert r.to_dict()["versions"][-1]["surrogate_check"]["disagreeing"] == ["t/three"]
+    d = r.to_dict()
+    assert d["versions"][-1]["surrogate_check"]["disagreeing"] == ["t/three"]
+    assert d["verdict"]["surrogate_disagrees"] == ["t/three"] and d["verdict"]["refinement_waves"] == 2
+
+
+def test_report_lists_the_waves(looped, tmp_path):
+    html = looped.write(tmp_path / "diag")["report"].read_text()
+    assert "History-matching waves" in html and "confirmation sets joined" in html
+    assert json.loads((tmp_path / "diag" / "diagnosis.json").read_text())["verdict"]["surrogate_disagrees"] == []
 
 
 def test_settings_validate_max_refine_waves():

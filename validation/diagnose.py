@@ -120,10 +120,18 @@ class DiagnosisResult:
     def added_effects(self) -> tuple[str, ...]:
         return self.final.version.effect_names
 
+    @property
+    def surrogate_disagrees(self) -> list[str]:
+        """Observables where the DEM at the final best fit still contradicts the surrogate (none when met)."""
+        check = self.final.check
+        return [] if self.met or check is None else list(check.disagreeing)
+
     def to_dict(self) -> dict[str, Any]:
         return _jsonable({
             "verdict": {"met": self.met, "headline": self.headline, "details": self.details,
-                        "base_adequate": self.base_adequate, "added_effects": list(self.added_effects)},
+                        "base_adequate": self.base_adequate, "added_effects": list(self.added_effects),
+                        "surrogate_disagrees": self.surrogate_disagrees,
+                        "refinement_waves": len(self.final.refinement)},
             "observables": [o.to_dict() for o in self.observations],
             "candidates": [c.to_dict() for c in self.candidates],
             "settings": self.settings.to_dict(),

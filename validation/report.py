@@ -21,6 +21,22 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["build_report"]
 
 
+def _refinement_blocks(result, within: float, cutoff: float) -> list:
+    """A table of the history-matching waves of every model version that had any (none: nothing)."""
+    rows = [[v.name, r.wave, r.new_sets, r.confirmation_sets, r.design_sets,
+             Cell(round(r.check.max_disagreement, 1), "good" if r.check.agrees else "bad"),
+             ", ".join(r.check.disagreeing) or "none", _z_cell(r.check.max_abs_z_dem, within, cutoff)]
+            for v in result.versions for r in v.refinement]
+    if not rows:
+        return []
+    return ["Refinement waves: each adds sets in the non-implausible region and the DEM runs at earlier best "
+            "fits, refits and re-confirms, until the DEM at the best fit agrees with the surrogate there "
+            f"(max_refine_waves = {result.settings.max_refine_waves}).",
+            Table(["model version", "wave", "new sets", "confirmation sets joined", "design sets",
+                   "largest DEM − surrogate (combined sd)", "surrogate contradicted on", "largest |z| (DEM)"], rows,
+                  caption="History-matching waves")]
+
+
 def _z_cell(z: float, within: float, cutoff: float) -> Cell:
     if not np.isfinite(z):
         return Cell(None, "warn")
@@ -163,6 +179,7 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
         "replicates.",
         Table(["model version", "observable", "unit", "design sets", "CV R²", "CV RMSE", "CV coverage of ±2 sd",
                "DEM noise sd"], qrows),
+        *_refinement_blocks(result, w, cut),
     ]))
     f = result.forward
     footer = (f"warpdem diagnosis · forward model: {f['calls']} calls, {f['runs']} runs ({f['failed_runs']} failed), "
