@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import threading
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -214,3 +215,23 @@ def test_pooled_diagnoses_run_their_waves_through_the_pool(looped, one_wave):
     assert _without_seconds(together[0].to_dict()["versions"]) == _without_seconds(looped.to_dict()["versions"])
     assert _without_seconds(together[1].to_dict()["versions"]) == _without_seconds(one_wave.to_dict()["versions"])
     assert inner.threads - {threading.main_thread().name}  # the waves' requests came from the pool's workers
+
+
+def test_max_refine_waves_is_read_from_the_config_and_checked(tmp_path):
+    """The YAML key reaches the settings; a negative count is refused naming the key."""
+    import yaml
+
+    from validation.config import load_diagnosis_config
+    from warpdem import ConfigError
+
+    root = Path(__file__).resolve().parents[1] / "validation" / "configs"
+    doc = yaml.safe_load((root / "tiny_diagnosis.yaml").read_text())
+    (tmp_path / "tiny_lab.yaml").write_text((root / "tiny_lab.yaml").read_text())
+    doc["diagnosis"]["max_refine_waves"] = 2
+    (tmp_path / "d.yaml").write_text(yaml.safe_dump(doc))
+    cfg, _ = load_diagnosis_config(tmp_path / "d.yaml")
+    assert cfg.diagnosis.max_refine_waves == 2
+    doc["diagnosis"]["max_refine_waves"] = -1
+    (tmp_path / "d.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match="max_refine_waves"):
+        load_diagnosis_config(tmp_path / "d.yaml")

@@ -34,6 +34,7 @@ import json
 import math
 import os
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -301,8 +302,12 @@ def diagnose(observables: Sequence[Observable] | Observations, base_space: Param
 
 
 def _say(msg: str) -> None:
-    """One progress line on stderr (the report and JSON carry the results)."""
-    print(f"diagnose: {msg}", file=sys.stderr, flush=True)
+    """One progress line on stderr (the report and JSON carry the results); a diagnosis running
+    beside others in one process (``warpdem diagnose a.yaml b.yaml``) names its config."""
+    thread = threading.current_thread().name
+    who = "" if thread == "MainThread" or thread.startswith(("pooled-worker-", "Thread-")) else f" [{thread}]"
+    sys.stderr.write(f"diagnose{who}: {msg}\n")  # one write per line: threads do not splice lines
+    sys.stderr.flush()
 
 
 def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[CandidateEffect, ...],

@@ -189,8 +189,10 @@ def run_as_workers(pool: ForwardModel, tasks: Sequence[Callable[[], Any]],
             pool._leave()
 
     pool._add_workers(len(tasks))
-    threads = [threading.Thread(target=body, args=(i,), name=names[i] if names else f"pooled-worker-{i}",
-                                daemon=True) for i in range(len(tasks))]
+    parent = threading.current_thread().name  # nested workers keep their diagnosis's name
+    default = (lambda i: f"pooled-worker-{i}") if parent == "MainThread" else (lambda i: parent)
+    threads = [threading.Thread(target=body, args=(i,), name=names[i] if names else default(i), daemon=True)
+               for i in range(len(tasks))]
     with pool.idle():
         for th in threads:
             th.start()
