@@ -1,8 +1,8 @@
 """The staged contact computation (warpdem.stages) reproduces the single contact kernel it
-replaced: four short CPU scenes are run and their body positions, velocities, contact
+replaced: five short CPU scenes (and one contact launch with ``walls_on=False``) are run and their body positions, velocities, contact
 counts and wall wear compared with values saved from the single-kernel code
 (tests/data/contact_stages_reference.npz, written by ``python tests/test_contact_stages.py --write``
-at commit 3cede01, before the split).
+with the engine of commit 3cede01, before the split).
 
 Tolerance: the stages evaluate every contact with the same float32 operations in the same
 order (wall contacts first, then the neighbour list; the particle stage continues the wall
@@ -98,12 +98,38 @@ def scene_wear() -> wd.Simulation:
     return wd.Simulation(b.finalize("cpu"), dt=2e-5, use_graph=False)
 
 
-SCENES = {"drum": scene_drum, "clumps": scene_clumps, "cohesion_epsd2": scene_cohesion_epsd2, "wear": scene_wear}
+def scene_no_walls() -> wd.Simulation:
+    """A model without walls (the wall stages are skipped): clumps and spheres of two worlds
+    colliding in free space with epsd rolling resistance."""
+    rng = np.random.default_rng(5)
+    b = wd.ModelBuilder(num_worlds=2, contact_law=wd.ContactLaw(rolling="epsd"), gravity=(0.0, 0.0, 0.0))
+    b.add_material(wd.GRAVEL)
+    offsets = np.array([[-0.5 * R, 0.0, 0.0], [0.5 * R, 0.0, 0.0]])
+    mass = 2.0 * wd.GRAVEL.density * 4.0 / 3.0 * math.pi * (0.8 * R) ** 3
+    for w in range(2):
+        pos = _lattice(27, 2.8 * R, (0.0, 0.0, 0.0), rng, 1e-4)
+        for p in pos[:8]:
+            q = rng.normal(size=4)
+            b.add_body(p, mass, (0.1 * mass * R**2, 0.3 * mass * R**2, 0.3 * mass * R**2), offsets, [0.8 * R] * 2,
+                       "gravel", world=w, rotation=q / np.linalg.norm(q), velocity=rng.normal(0.0, 0.5, 3))
+        centre = pos.mean(axis=0)
+        b.add_spheres(pos[8:], R, "gravel", world=w, velocities=(centre - pos[8:]) * 150.0)
+    b.set_contact_parameters(mu_r_pp=[0.05, 0.2])
+    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False)
+
+
+SCENES = {"drum": scene_drum, "clumps": scene_clumps, "cohesion_epsd2": scene_cohesion_epsd2, "wear": scene_wear,
+          "no_walls": scene_no_walls, "drum_walls_off": scene_drum}
 STEPS = 200
 
 
 def run_scene(name: str) -> dict[str, np.ndarray]:
     sim = SCENES[name]()
+    if name == "drum_walls_off":  # the profiling path: one contact launch without the walls
+        sim.run(50)
+        sim.solver.launch_contacts(sim.state, sim._next, sim.dt, walls_on=False)
+        return {"contact_count": sim._next.contact_count.numpy(), "sphere_f": sim.solver.sphere_f.numpy(),
+                "sphere_t": sim.solver.sphere_t.numpy()}
     if name == "drum":
         sim.run(100)
         sim.pause_worlds([1])

@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from . import kernels
+from . import kernels, stages
 from .errors import ConfigError, ContactOverflowError, StabilityError, StabilityWarning
 from .model import Model, State
 from .timestep import TimeStepLimits, check_time_step, speed_bound
@@ -108,6 +108,8 @@ class DEMSolver:
         k = model.max_contacts
         self.sphere_f = wp.zeros(n, dtype=wp.vec3, device=d)
         self.sphere_t = wp.zeros(n, dtype=wp.vec3, device=d)
+        # this step's wall contacts, from the wall-collection stage to the wall-force stage
+        self.wall_count = wp.zeros(n, dtype=int, device=d)
         self.slot_point = wp.zeros(n * k, dtype=wp.vec3, device=d)
         self.slot_depth = wp.zeros(n * k, dtype=float, device=d)
         self.slot_tri = wp.zeros(n * k, dtype=int, device=d)
@@ -142,7 +144,8 @@ class DEMSolver:
         self.nb_overflow = wp.zeros(2, dtype=int, device=d)  # [dropped, largest list needed]
         self.list_builds = wp.zeros(1, dtype=int, device=d)
         self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
-        self.kernel = kernels.contact_kernel(model.contact_law)
+        self.stages = stages.contact_stages(model.contact_law)
+        self.pack_contact_inputs()
         self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
         # body-force models (warpdem.body_forces): launched after the contacts, summed into one
         # per-body force that the integrator adds (with the external force, if used)
@@ -286,25 +289,108 @@ class DEMSolver:
         """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
         self.rebuild.fill_(1)
 
+    def pack_contact_inputs(self) -> None:
+        """Pack the model's and the solver's arrays that the contact stages read into their
+        structs (:mod:`warpdem.stages.structs`; references, no copies). Done once at
+        construction; call again after replacing any of those arrays (the per-State history
+        and the step's time are packed at launch)."""
+        m = self.model
+        spheres = stages.SphereSet()
+        spheres.view = self.views
+        spheres.world = m.sphere_world
+        neighbours = stages.NeighbourList()
+        neighbours.count = self.nb_count
+        neighbours.index = self.nb_index
+        neighbours.capacity = self.max_neighbours
+        neighbours.near_static_wall = self.near_wall
+        walls = stages.WallSet()
+        walls.mesh = m.wall_mesh
+        walls.world_start = m.world_wall_start
+        walls.world_index = m.world_wall_index
+        walls.moving = self.wall_moving
+        walls.material = m.wall_material
+        walls.tri_offset = m.wall_tri_offset
+        walls.lin_vel = m.wall_lin_vel
+        walls.ang_vel = m.wall_ang_vel
+        walls.origin = m.wall_origin
+        walls.t_start = m.wall_t_start
+        walls.t_stop = m.wall_t_stop
+        params = stages.ContactParameters()
+        params.youngs_modulus = m.mat_e
+        params.poisson_ratio = m.mat_nu
+        params.table = m.contact_params
+        found = stages.WallSlots()
+        found.count = self.wall_count
+        found.point = self.slot_point
+        found.depth = self.slot_depth
+        found.triangle = self.slot_tri
+        wear = stages.WearAccumulators()
+        ws = self.wall_stats
+        wear.energy_n, wear.energy_t = ws.energy_n, ws.energy_t
+        wear.impulse_n, wear.impulse_t = ws.impulse_n, ws.impulse_t
+        wear.triangles_per_world = m.total_triangles
+        forces = stages.SphereForces()
+        forces.force = self.sphere_f
+        forces.torque = self.sphere_t
+        self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces)
+        self._packed_history: dict[int, tuple[tuple, stages.ContactHistory]] = {}
+        self._packed_step: dict[tuple, tuple[wp.array, stages.StepInputs]] = {}
+
+    def _history(self, state: State) -> stages.ContactHistory:
+        """The contact-history struct of ``state`` (packed once per State)."""
+        arrays = (state.contact_count, state.contact_partner, state.contact_spring, state.contact_roll,
+                  state.contact_wnormal)
+        cached = self._packed_history.get(id(state))
+        if cached is not None and all(a is b for a, b in zip(cached[0], arrays)):
+            return cached[1]
+        h = stages.ContactHistory()
+        h.count, h.partner, h.spring, h.roll, h.wall_normal = arrays
+        h.slots = self.model.max_contacts
+        if len(self._packed_history) > 4:  # States of this solver: usually two
+            self._packed_history.clear()
+        self._packed_history[id(state)] = (arrays, h)
+        return h
+
+    def _step_inputs(self, state: State, dt: float, walls_on: bool) -> stages.StepInputs:
+        """The step struct for ``state``'s time, ``dt`` [s] and whether the wall stages run."""
+        key = (id(state.time), float(dt), bool(walls_on))
+        cached = self._packed_step.get(key)
+        if cached is not None and cached[0] is state.time:
+            return cached[1]
+        step = stages.StepInputs()
+        step.time = state.time
+        step.dt = float(dt)
+        step.world_paused = self.world_paused
+        step.walls_on = int(walls_on)
+        step.overflow = self.overflow
+        if len(self._packed_step) > 16:
+            self._packed_step.clear()
+        self._packed_step[key] = (state.time, step)
+        return step
+
     def launch_contacts(self, state_in: State, state_out: State, dt: float, walls_on: bool = True) -> None:
-        """The contact kernel alone (the grid must be built for ``state_in``); ``walls_on=False``
-        leaves the walls out (profiling)."""
+        """The contact stages alone (the neighbour list must be built for ``state_in``):
+        wall contacts, wall forces and wear, particle forces (:mod:`warpdem.stages`), from
+        ``state_in``'s history into ``state_out``'s, forces into ``sphere_f``/``sphere_t``.
+        ``walls_on=False`` leaves the walls out (profiling); a model without walls skips the
+        wall stages too."""
         m = self.model
         d = m.device
-        ws = self.wall_stats
-        wp.launch(self.kernel, dim=m.num_spheres, inputs=[
-            self.nb_count, self.nb_index, self.max_neighbours, self.near_wall, self.wall_moving, self.views,
-            m.sphere_world, m.mat_e, m.mat_nu, m.contact_params, m.max_radius,
-            m.wall_mesh, m.world_wall_start, m.world_wall_index, m.wall_material, m.wall_tri_offset, m.wall_lin_vel,
-            m.wall_ang_vel, m.wall_origin, m.wall_t_start, m.wall_t_stop, int(walls_on), m.total_triangles,
-            state_in.time, dt,
-            m.max_contacts,
-            state_in.contact_count, state_in.contact_partner, state_in.contact_spring, state_in.contact_roll,
-            state_in.contact_wnormal,
-            state_out.contact_count, state_out.contact_partner, state_out.contact_spring, state_out.contact_roll,
-            state_out.contact_wnormal,
-            self.slot_point, self.slot_depth, self.slot_tri, self.sphere_f, self.sphere_t,
-            ws.energy_n, ws.energy_t, ws.impulse_n, ws.impulse_t, self.world_paused, self.overflow], device=d)
+        n = m.num_spheres
+        p = self._packed
+        st = self.stages
+        walls_on = bool(walls_on) and len(m.walls) > 0
+        step = self._step_inputs(state_in, dt, walls_on)
+        history = self._history(state_in)
+        contacts = self._history(state_out)
+        if walls_on:
+            wp.launch(st.collect_wall_contacts, dim=n,
+                      inputs=[p.spheres, p.neighbours, p.walls, step, contacts, p.found], device=d)
+            wp.launch(st.wall_forces, dim=n,
+                      inputs=[p.spheres, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
+                      device=d)
+        wp.launch(st.particle_forces, dim=n,
+                  inputs=[p.spheres, p.neighbours, p.params, step, history, contacts, p.found, p.forces], device=d)
 
     # ---------------------------------------------------------------- checks
     def check(self, on_unstable: str = "raise") -> dict[int, str]:
@@ -397,7 +483,9 @@ class Simulation:
             self.state, self._next = self._next, self.state
 
     def invalidate_graph(self) -> None:
-        """Call after replacing model arrays that a captured graph refers to."""
+        """Call after replacing model arrays that a captured graph refers to (also repacks the
+        contact stages' structs)."""
+        self.solver.pack_contact_inputs()
         self._graph = None
 
     def failed_worlds(self) -> dict[int, str]:

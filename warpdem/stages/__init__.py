@@ -1,0 +1,68 @@
+"""The contact computation of one step, in stages with one job each.
+
+==========================  ==============================================  ==========================
+stage (module)              job                                             writes
+==========================  ==============================================  ==========================
+1 ``collect_wall_contacts`` wall candidates from each wall's rest-frame     wall slots (tag, normal,
+  (wall_contacts)           BVH, merged so that one physical contact is     point, depth, triangle)
+                            one slot
+2 ``wall_forces``           wall forces with tangential/rolling history,    history springs, per-sphere
+  (wall_contacts)           wall wear (relative wear model)                 force/torque, wear
+3 ``particle_forces``       sphere-sphere forces over the Verlet list,      history, per-sphere
+  (particle_contacts)       history; finishes each sphere's row (inactive,  force/torque (continued)
+                            paused worlds)
+==========================  ==============================================  ==========================
+
+Every stage runs one thread per sphere and reads packed structs (:mod:`.structs`). Stages 2
+and 3 are generated per :class:`~warpdem.contact.law.ContactLaw` from its sub-models'
+``wp.func``s (:func:`.law.law_evaluator`), so a sub-model found by the package scan plugs in
+with no edit. Forces: stage 2 writes the sum over a sphere's wall contacts, stage 3 starts
+from it and adds the particle contacts in neighbour order, so every sphere's force is the
+same float sum, in the same order, as in one fused kernel (deterministic, no atomics; a
+per-stage output summed later would change the summation order and round differently).
+Stages 1 and 2 are skipped without walls (``walls_on=False``, or a model without walls).
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import warp as wp
+
+from ..contact.law import ContactLaw
+from .particle_contacts import particle_forces_kernel
+from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
+                      WallSlots, WearAccumulators)
+from .wall_contacts import collect_wall_contacts, wall_forces_kernel
+
+__all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", "ContactParameters", "NeighbourList",
+           "SphereForces", "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
+
+
+@dataclass(frozen=True)
+class ContactStages:
+    """The three contact kernels of one contact law, in launch order."""
+
+    collect_wall_contacts: "wp.Kernel"
+    wall_forces: "wp.Kernel"
+    particle_forces: "wp.Kernel"
+
+
+@dataclass
+class PackedInputs:
+    """The structs the stages read that do not change from step to step (packed once by
+    :meth:`warpdem.solver.DEMSolver.pack_contact_inputs`)."""
+
+    spheres: SphereSet
+    neighbours: NeighbourList
+    walls: WallSet
+    params: ContactParameters
+    found: WallSlots
+    wear: WearAccumulators
+    forces: SphereForces
+
+
+@functools.lru_cache(maxsize=None)
+def contact_stages(law: ContactLaw) -> ContactStages:
+    """The stage kernels of ``law`` (built once per law and cached)."""
+    return ContactStages(collect_wall_contacts, wall_forces_kernel(law), particle_forces_kernel(law))

@@ -1,0 +1,142 @@
+"""Particle stage: sphere-sphere contact forces over the Verlet list, with tangential and
+rolling history, added to the wall stages' per-sphere sums."""
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from ..contact.base import ContactInput
+from ..contact.law import ContactLaw
+from ..kernels import effective_shear_modulus, effective_youngs_modulus, mass_felt_at
+from .law import law_evaluator
+from .structs import ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSlots
+
+wp.set_module_options({"enable_backward": False, "fast_math": True})
+
+
+@functools.lru_cache(maxsize=None)
+def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
+    """Stage 3 of one contact law (built and cached per law), one thread per sphere.
+
+    Full neighbour list (each pair is evaluated from both sides, so sphere i writes only its
+    own row: no atomics, deterministic). For each neighbour j of another body within
+    r_i + r_j: normal n = (x_i - x_j) / |x_i - x_j|, overlap delta = r_i + r_j - |x_i - x_j|,
+    contact point p = x_i - (r_i - delta / 2) n; last step's history of partner j is taken;
+    R* = r_i r_j / (r_i + r_j), m* = m_i m_j / (m_i + m_j) with the masses felt at p
+    (:func:`warpdem.kernels.mass_felt_at`), I* = I_i I_j / (I_i + I_j). The contacts are
+    appended after the wall contacts of stage 1 (``found.count``) and the forces added, in
+    neighbour order, to the sums of stage 2 (zero without wall contacts), so the result does
+    not depend on the split into stages. Also the stage that finishes every sphere's row:
+    inactive spheres get no contacts; a paused world keeps its history unchanged and feels no
+    force."""
+    evaluate = law_evaluator(law)
+    roll_hist = bool(law.needs_rolling_history)
+
+    @wp.kernel
+    def particle_forces(spheres: SphereSet, neighbours: NeighbourList, params: ContactParameters, step: StepInputs,
+                        history: ContactHistory, contacts: ContactHistory, found: WallSlots, forces: SphereForces):
+        i = wp.tid()
+        base = i * contacts.slots
+        me = spheres.view[i]
+        if me.r < 0.0:
+            contacts.count[i] = 0
+            forces.force[i] = wp.vec3(0.0)
+            forces.torque[i] = wp.vec3(0.0)
+            return
+        world = spheres.world[i]
+        if step.world_paused[world] != 0:
+            # a paused world is held at rest: its contact history is carried over unchanged
+            n_keep = history.count[i]
+            contacts.count[i] = n_keep
+            for s in range(n_keep):
+                contacts.partner[base + s] = history.partner[base + s]
+                contacts.spring[base + s] = history.spring[base + s]
+                if wp.static(roll_hist):
+                    contacts.roll[base + s] = history.roll[base + s]
+                contacts.wall_normal[base + s] = history.wall_normal[base + s]
+            forces.force[i] = wp.vec3(0.0)
+            forces.torque[i] = wp.vec3(0.0)
+            return
+        xi = me.x
+        ri = me.r
+        xb = me.xb
+        vb = me.v
+        wb = me.w
+        ib_mean = me.i_mean
+        e_i = params.youngs_modulus[me.mat]
+        nu_i = params.poisson_ratio[me.mat]
+        n_old = history.count[i]
+        dt = step.dt
+        n_new = int(0)
+        f_sum = wp.vec3(0.0)
+        t_sum = wp.vec3(0.0)
+        if step.walls_on != 0:  # continue after the wall stages' contacts and sums
+            n_new = found.count[i]
+            if n_new > 0:
+                f_sum = forces.force[i]
+                t_sum = forces.torque[i]
+        nb_base = i * neighbours.capacity
+        for nb in range(neighbours.count[i]):
+            j = neighbours.index[nb_base + nb]
+            other = spheres.view[j]
+            rj = other.r
+            if rj < 0.0:
+                continue
+            d = xi - other.x
+            rr = ri + rj
+            dist2 = wp.dot(d, d)
+            if dist2 >= rr * rr:
+                continue
+            if n_new >= contacts.slots:
+                wp.atomic_add(step.overflow, 0, 1)
+                continue
+            dist = wp.sqrt(dist2)
+            nrm = wp.vec3(0.0, 0.0, 1.0)
+            if dist > 1.0e-12:
+                nrm = d / dist
+            overlap = rr - dist
+            spring = wp.vec3(0.0)
+            roll = wp.vec3(0.0)
+            for o in range(n_old):
+                if history.partner[base + o] == j:
+                    spring = history.spring[base + o]
+                    if wp.static(roll_hist):
+                        roll = history.roll[base + o]
+            arm_i = ri - 0.5 * overlap
+            cp = xi - arm_i * nrm
+            xbj = other.xb
+            ibj_mean = other.i_mean
+            e_j = params.youngs_modulus[other.mat]
+            nu_j = params.poisson_ratio[other.mat]
+            c = ContactInput()
+            c.normal = nrm
+            c.overlap = overlap
+            c.v_rel = (vb + wp.cross(wb, cp - xb)) - (other.v + wp.cross(other.w, cp - xbj))
+            c.w_rel = wb - other.w
+            c.r_eff = ri * rj / rr
+            c.radius_i = ri
+            c.radius_j = rj
+            m_i = mass_felt_at(me.m, ib_mean, xi - xb, nrm)
+            m_j = mass_felt_at(other.m, ibj_mean, other.x - xbj, nrm)
+            c.m_eff = m_i * m_j / (m_i + m_j)
+            c.e_eff = effective_youngs_modulus(e_i, nu_i, e_j, nu_j)
+            c.g_eff = effective_shear_modulus(e_i, nu_i, e_j, nu_j)
+            c.arm = arm_i
+            c.i_eff = ib_mean * ibj_mean / (ib_mean + ibj_mean)
+            c.dt = dt
+            c.row = 2 * world
+            fn, ft, tr, spring_new, roll_new = evaluate(c, params.table, spring, roll)
+            force = fn * nrm + ft
+            f_sum = f_sum + force
+            t_sum = t_sum + wp.cross(cp - xb, force) + tr
+            contacts.partner[base + n_new] = j
+            contacts.spring[base + n_new] = spring_new
+            if wp.static(roll_hist):
+                contacts.roll[base + n_new] = roll_new
+            n_new += 1
+        contacts.count[i] = n_new
+        forces.force[i] = f_sum
+        forces.torque[i] = t_sum
+
+    return particle_forces

@@ -1,0 +1,114 @@
+"""Packed inputs and outputs of the contact stages (:mod:`warpdem.stages`).
+
+Each ``@wp.struct`` groups the arrays of one thing a stage reads or writes, so that a stage
+kernel takes a handful of arguments instead of ~46 loose ones. A struct holds references to
+arrays (no copies): the solver packs them once (:meth:`warpdem.solver.DEMSolver.pack_contact_inputs`)
+and passes them by value at each launch. Units are SI.
+"""
+from __future__ import annotations
+
+import warp as wp
+
+from ..kernels import SphereView
+
+
+@wp.struct
+class SphereSet:
+    """What the stages read of the spheres this step (written by ``place_sphere_views``)."""
+
+    view: wp.array(dtype=SphereView)  # packed sphere and body state; radius < 0: inactive body
+    world: wp.array(dtype=int)  # world index of each sphere
+
+
+@wp.struct
+class NeighbourList:
+    """The Verlet list of :func:`warpdem.kernels.build_neighbour_list` (sorted by index)."""
+
+    count: wp.array(dtype=int)  # entries per sphere
+    index: wp.array(dtype=int)  # neighbour sphere indices, ``capacity`` slots per sphere
+    capacity: int  # slots per sphere (``max_neighbours``)
+    near_static_wall: wp.array(dtype=int)  # 1: a static wall lies within r_i + skin (query its BVH)
+
+
+@wp.struct
+class WallSet:
+    """Triangle-mesh walls with prescribed rigid motion, each looked up in its rest frame."""
+
+    mesh: wp.array(dtype=wp.uint64)  # wp.Mesh id of each wall's rest mesh (BVH)
+    world_start: wp.array(dtype=int)  # CSR: the walls of world w are world_index[world_start[w]:world_start[w+1]]
+    world_index: wp.array(dtype=int)
+    moving: wp.array(dtype=int)  # 1: the wall has a prescribed motion
+    material: wp.array(dtype=int)  # material index
+    tri_offset: wp.array(dtype=int)  # index of the wall's first triangle among all walls' triangles
+    lin_vel: wp.array(dtype=wp.vec3)  # translation velocity v [m/s]
+    ang_vel: wp.array(dtype=wp.vec3)  # angular velocity w [rad/s]
+    origin: wp.array(dtype=wp.vec3)  # rotation centre c0 at rest [m]
+    t_start: wp.array(dtype=float)  # motion window [t_start, t_stop) [s]
+    t_stop: wp.array(dtype=float)
+
+
+@wp.struct
+class ContactParameters:
+    """Materials and the per-world contact-law parameter table."""
+
+    youngs_modulus: wp.array(dtype=float)  # E per material [Pa]
+    poisson_ratio: wp.array(dtype=float)  # nu per material [-]
+    table: wp.array2d(dtype=float)  # p[2 world + pair type (0 pp, 1 pw), column of the law]
+
+
+@wp.struct
+class StepInputs:
+    """The step's time and the per-world and global flags the stages share."""
+
+    time: wp.array(dtype=wp.float64)  # simulated time t at the start of the step [s] (1 entry)
+    dt: float  # time step [s]
+    world_paused: wp.array(dtype=int)  # 1: the world is held at rest (contacts skipped, history kept)
+    walls_on: int  # 0: no wall stage ran this step (profiling, or a model without walls)
+    overflow: wp.array(dtype=int)  # [0]: contacts that did not fit the slots (counted, raised on check)
+
+
+@wp.struct
+class ContactHistory:
+    """Per-sphere contact slots of one State: this step's (out) or last step's (in).
+
+    Slot ``s`` of sphere ``i`` is entry ``i * slots + s``; wall contacts come first, then
+    particle contacts in neighbour-list order."""
+
+    count: wp.array(dtype=int)  # used slots per sphere
+    partner: wp.array(dtype=int)  # sphere index >= 0, or -(wall + 1) for a wall
+    spring: wp.array(dtype=wp.vec3)  # tangential spring delta_t [m]
+    roll: wp.array(dtype=wp.vec3)  # rolling history (torque [N m]); 1 entry if the law keeps none
+    wall_normal: wp.array(dtype=wp.vec3)  # unit normal of a wall contact (matches history across steps)
+    slots: int  # slots per sphere (``max_contacts``)
+
+
+@wp.struct
+class WallSlots:
+    """This step's merged wall contacts, from the collection stage to the wall-force stage
+    (same slot layout as :class:`ContactHistory`; partner and normal are written there)."""
+
+    count: wp.array(dtype=int)  # wall contacts per sphere (slots 0 .. count - 1)
+    point: wp.array(dtype=wp.vec3)  # contact point on the wall, world frame [m]
+    depth: wp.array(dtype=float)  # overlap r_i - distance [m]
+    triangle: wp.array(dtype=int)  # triangle of the wall (for wear)
+
+
+@wp.struct
+class WearAccumulators:
+    """Per-world, per-triangle wall accumulators (relative wear model, ``DEMSolver.wall_stats``);
+    entry ``world * triangles_per_world + tri_offset[wall] + triangle``."""
+
+    energy_n: wp.array(dtype=float)  # sum |F_n v_n| dt [J]
+    energy_t: wp.array(dtype=float)  # sum |F_t . v_t| dt [J]
+    impulse_n: wp.array(dtype=float)  # sum |F_n| dt [N s]
+    impulse_t: wp.array(dtype=float)  # sum |F_t| dt [N s]
+    triangles_per_world: int  # all walls' triangles (``Model.total_triangles``)
+
+
+@wp.struct
+class SphereForces:
+    """Contact force [N] and torque about the body's centre of mass [N m] on each sphere
+    (summed per body by ``integrate_bodies``)."""
+
+    force: wp.array(dtype=wp.vec3)
+    torque: wp.array(dtype=wp.vec3)

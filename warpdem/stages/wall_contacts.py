@@ -1,0 +1,256 @@
+"""Wall stages: collect the wall contacts of each sphere, then their forces and wall wear.
+
+A wall moves rigidly: a point x0 of its rest mesh is at x(t) = c(t) + R(w tau) (x0 - c0). The
+mesh is never moved: a sphere at x is looked up in the rest mesh at x0 = c0 + R^T (x - c(t))
+(:func:`warpdem.kernels.point_in_wall_rest_frame`) and the closest point and normal found
+there are mapped back to the world frame.
+"""
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+from ..contact.base import ContactInput
+from ..contact.law import ContactLaw
+from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, closest_point_triangle, effective_shear_modulus,
+                       effective_youngs_modulus, mass_felt_at, point_in_wall_rest_frame, wall_is_moving,
+                       wall_point_velocity)
+from .law import law_evaluator
+from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
+                      WallSlots, WearAccumulators)
+
+wp.set_module_options({"enable_backward": False, "fast_math": True})
+
+
+@wp.kernel
+def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet, step: StepInputs,
+                          contacts: ContactHistory, found: WallSlots):
+    """Stage 1, one thread per sphere: the wall contacts of sphere i at the step's time.
+
+    The closest feature of every triangle within the sphere's radius (rest-frame BVH query)
+    is a candidate. A candidate and a collected contact describe one contact if their normals
+    agree (cosine > WALL_MERGE_COS), or if the shallower one's contact point lies on (or
+    behind) the deeper one's tangent plane: an edge/vertex of a neighbouring triangle touched
+    "through" a face the sphere already presses on (coplanar or convex neighbours). The deeper
+    one is kept. Concave corners (floor and side wall) stick out of each other's planes and
+    stay two contacts. Writes the wall tag -(k + 1) and normal into this step's history
+    (``contacts``: slots 0 .. n - 1) and the point, depth and triangle into ``found``; a
+    contact beyond the slots counts into ``step.overflow``. Spheres of inactive bodies or
+    paused worlds get none (the particle stage handles them); a sphere that is neither near a
+    static wall (list build) nor in a world with a moving wall is decided without reading its
+    state."""
+    i = wp.tid()
+    world = spheres.world[i]
+    close_to_static_wall = neighbours.near_static_wall[i]
+    first_wall = walls.world_start[world]
+    n_walls = walls.world_start[world + 1] - first_wall
+    # most spheres of a bed are far from every static wall: decided without reading the sphere
+    any_wall = close_to_static_wall
+    for kk in range(n_walls):
+        any_wall = any_wall + walls.moving[walls.world_index[first_wall + kk]]
+    if any_wall == 0 or step.world_paused[world] != 0:
+        found.count[i] = 0
+        return
+    me = spheres.view[i]
+    if me.r < 0.0:
+        found.count[i] = 0
+        return
+    base = i * contacts.slots
+    max_contacts = contacts.slots
+    xi = me.x
+    ri = me.r
+    t_now = step.time[0]
+    n_new = int(0)
+    for kk in range(n_walls):
+        k = walls.world_index[first_wall + kk]
+        moving = walls.moving[k]
+        if moving == 0 and close_to_static_wall == 0:
+            continue
+        mesh = walls.mesh[k]
+        tag = -(k + 1)
+        ext = wp.vec3(ri, ri, ri)
+        # the sphere in the wall's rest frame (static walls: the same point)
+        rot = wp.quat_identity()
+        c_now = wp.vec3(0.0)
+        c_rest = wp.vec3(0.0)
+        x_rest = xi
+        if moving != 0:
+            c_rest = walls.origin[k]
+            x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, walls.t_start[k], walls.t_stop[k], c_rest,
+                                                          walls.lin_vel[k], walls.ang_vel[k])
+        mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
+        tri = int(0)
+        while wp.mesh_query_aabb_next(mquery, tri):
+            m = wp.mesh_get(mesh)
+            pa = m.points[m.indices[3 * tri + 0]]
+            pb = m.points[m.indices[3 * tri + 1]]
+            pc = m.points[m.indices[3 * tri + 2]]
+            cp = closest_point_triangle(x_rest, pa, pb, pc)
+            d = x_rest - cp
+            dist = wp.length(d)
+            if dist >= ri or dist < 1.0e-12:
+                continue
+            nrm = d / dist
+            if moving != 0:  # back to the world frame
+                nrm = wp.quat_rotate(rot, nrm)
+                cp = c_now + wp.quat_rotate(rot, cp - c_rest)
+            depth = ri - dist
+            keep = int(1)
+            tol = 1.0e-3 * ri
+            for s in range(n_new):
+                tag_s = contacts.partner[base + s]
+                if tag_s == SLOT_EMPTY:
+                    continue
+                n_s = contacts.wall_normal[base + s]
+                p_s = found.point[base + s]
+                d_s = found.depth[base + s]
+                related = int(0)
+                if wp.dot(n_s, nrm) > WALL_MERGE_COS:
+                    related = 1
+                if d_s >= depth and wp.dot(cp - p_s, n_s) <= tol:
+                    related = 1
+                if depth > d_s and wp.dot(p_s - cp, nrm) <= tol:
+                    related = 1
+                if related == 1:
+                    if d_s >= depth:
+                        keep = 0
+                    else:
+                        contacts.partner[base + s] = SLOT_EMPTY
+            if keep == 1:
+                # reuse a slot emptied above (many triangles meeting at a vertex must not
+                # exhaust the slots with replaced candidates), else append
+                slot = n_new
+                for s in range(n_new):
+                    if slot == n_new and contacts.partner[base + s] == SLOT_EMPTY:
+                        slot = s
+                if slot < max_contacts:
+                    contacts.partner[base + slot] = tag
+                    contacts.wall_normal[base + slot] = nrm
+                    found.depth[base + slot] = depth
+                    found.point[base + slot] = cp
+                    found.triangle[base + slot] = tri
+                    if slot == n_new:
+                        n_new += 1
+                else:
+                    wp.atomic_add(step.overflow, 0, 1)
+    # compact the slots (drop the ones replaced by deeper related contacts)
+    n_kept = int(0)
+    for s in range(n_new):
+        if contacts.partner[base + s] != SLOT_EMPTY:
+            if n_kept != s:
+                contacts.partner[base + n_kept] = contacts.partner[base + s]
+                contacts.wall_normal[base + n_kept] = contacts.wall_normal[base + s]
+                found.depth[base + n_kept] = found.depth[base + s]
+                found.point[base + n_kept] = found.point[base + s]
+                found.triangle[base + n_kept] = found.triangle[base + s]
+            n_kept += 1
+    found.count[i] = n_kept
+
+
+@wp.func
+def accumulate_wear(wear: WearAccumulators, entry: int, fn: float, ft: wp.vec3, v_rel: wp.vec3, nrm: wp.vec3,
+                    dt: float):
+    """Relative wear model of one wall contact over one step, added to triangle ``entry``:
+    |F_n v_n| dt and |F_t . v_t| dt [J], |F_n| dt and |F_t| dt [N s] (v_n = v_rel . n,
+    v_t = v_rel - v_n n)."""
+    v_n = wp.dot(v_rel, nrm)
+    v_t = v_rel - v_n * nrm
+    wp.atomic_add(wear.energy_n, entry, wp.abs(fn * v_n) * dt)
+    wp.atomic_add(wear.energy_t, entry, wp.abs(wp.dot(ft, v_t)) * dt)
+    wp.atomic_add(wear.impulse_n, entry, wp.abs(fn) * dt)
+    wp.atomic_add(wear.impulse_t, entry, wp.length(ft) * dt)
+
+
+@functools.lru_cache(maxsize=None)
+def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
+    """Stage 2 of one contact law (built and cached per law), one thread per sphere.
+
+    For each wall contact that stage 1 found: last step's history of the same wall is taken if
+    its normal agrees (cosine > WALL_MATCH_COS); the wall material's velocity at the contact
+    point (v + w x (p - c(t)) while the wall moves) gives the relative motion; the law gives
+    fn, ft and the rolling torque. Writes the springs into this step's history, the summed
+    force F = sum (fn n + ft) [N] and torque T = sum ((p - x_b) x F + torque) [N m] about the
+    body's centre into ``forces`` (the particle stage adds on), and, if the law tracks wear,
+    the per-triangle accumulators (atomic adds: many spheres touch one triangle). A sphere
+    without wall contacts returns at once and writes nothing."""
+    evaluate = law_evaluator(law)
+    track_wear = bool(law.track_wear)
+    roll_hist = bool(law.needs_rolling_history)
+
+    @wp.kernel
+    def wall_forces(spheres: SphereSet, walls: WallSet, params: ContactParameters, step: StepInputs,
+                    history: ContactHistory, contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
+                    forces: SphereForces):
+        i = wp.tid()
+        n_found = found.count[i]  # 0 for inactive spheres and paused worlds (stage 1)
+        if n_found == 0:
+            return
+        me = spheres.view[i]
+        world = spheres.world[i]
+        base = i * contacts.slots
+        xi = me.x
+        ri = me.r
+        xb = me.xb
+        vb = me.v
+        wb = me.w
+        e_i = params.youngs_modulus[me.mat]
+        nu_i = params.poisson_ratio[me.mat]
+        n_old = history.count[i]
+        t_now = step.time[0]
+        dt = step.dt
+        f_sum = wp.vec3(0.0)
+        t_sum = wp.vec3(0.0)
+        for s in range(n_found):
+            tag = contacts.partner[base + s]
+            kw = -tag - 1
+            nrm = contacts.wall_normal[base + s]
+            cp = found.point[base + s]
+            depth = found.depth[base + s]
+            spring = wp.vec3(0.0)
+            roll = wp.vec3(0.0)
+            for o in range(n_old):
+                if history.partner[base + o] == tag:
+                    if wp.dot(history.wall_normal[base + o], nrm) > WALL_MATCH_COS:
+                        spring = history.spring[base + o]
+                        if wp.static(roll_hist):
+                            roll = history.roll[base + o]
+            # wall kinematics at the contact point
+            v_wall = wall_point_velocity(t_now, walls.t_start[kw], walls.t_stop[kw], walls.origin[kw],
+                                         walls.lin_vel[kw], walls.ang_vel[kw], cp)
+            w_wall = wp.vec3(0.0)
+            if wall_is_moving(t_now, walls.t_start[kw], walls.t_stop[kw]):
+                w_wall = walls.ang_vel[kw]
+            mw = walls.material[kw]
+            e_w = params.youngs_modulus[mw]
+            nu_w = params.poisson_ratio[mw]
+            c = ContactInput()
+            c.normal = nrm
+            c.overlap = depth
+            c.v_rel = vb + wp.cross(wb, cp - xb) - v_wall
+            c.w_rel = wb - w_wall
+            c.r_eff = ri
+            c.radius_i = ri
+            c.radius_j = 0.0  # a wall: flat partner (infinite radius)
+            # lever x n: the contact point lies on the line through the sphere centre along n
+            c.m_eff = mass_felt_at(me.m, me.i_mean, xi - xb, nrm)
+            c.e_eff = effective_youngs_modulus(e_i, nu_i, e_w, nu_w)
+            c.g_eff = effective_shear_modulus(e_i, nu_i, e_w, nu_w)
+            c.arm = ri - depth
+            c.i_eff = me.i_mean
+            c.dt = dt
+            c.row = 2 * world + 1
+            fn, ft, tr, spring_new, roll_new = evaluate(c, params.table, spring, roll)
+            force = fn * nrm + ft
+            f_sum = f_sum + force
+            t_sum = t_sum + wp.cross(cp - xb, force) + tr
+            contacts.spring[base + s] = spring_new
+            if wp.static(roll_hist):
+                contacts.roll[base + s] = roll_new
+            if wp.static(track_wear):
+                entry = world * wear.triangles_per_world + walls.tri_offset[kw] + found.triangle[base + s]
+                accumulate_wear(wear, entry, fn, ft, c.v_rel, nrm, dt)
+        forces.force[i] = f_sum
+        forces.torque[i] = t_sum
+
+    return wall_forces
