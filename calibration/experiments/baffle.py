@@ -112,21 +112,12 @@ class BaffleBox(Experiment):
         return (-1.0, -10.0, self.removal_z), (self.floor_length, 10.0, 10.0)
 
     # ------------------------------------------------------------------ protocol (spec A)
-    def protocol(self, ctx: RunContext, t_motion: float) -> list[dict[str, Any]]:
+    def _measure_fill(self, ctx: RunContext) -> tuple[list, list]:
+        """h_fill [m] and bulk density [kg/m^3] of every world before the lift (None where the
+        measurement failed; the world's error is set)."""
         nw = ctx.num_worlds
-        box = self.remove_box()
-        out: list[dict[str, Any]] = [dict() for _ in range(nw)]
-        # Fill: settle under gravity until KE/particle < 1e-6 J or 1.5 s (spec A "Fill")
-        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
-        ctx.settle("fill_settle", t_max, t_min, box)
-        # level the surface if a levelling height is given (spec A "Fill")
-        if self.level_height is not None:
-            removed = level(ctx.sim, self.level_height)
-            for w in range(nw):
-                ctx.diag[w]["levelled_removed"] = int(removed[w])
-        # h_fill and bulk density before the lift (spec A "Measurement", "Also reported")
         x_all = ctx.sim.sphere_positions()
-        h_fill = [None] * nw
+        h_fill, rho = [None] * nw, [None] * nw
         dm = self.density_margin
         for w in range(nw):
             xs, rs = ctx.world_spheres(w, x_all)
@@ -139,11 +130,30 @@ class BaffleBox(Experiment):
             if h is None:
                 continue
             xb, mb = ctx.world_bodies(w)
-            rho = ctx.measure(w, "bulk_density", bulk_density, xb, np.zeros(len(xb)), mb,
-                              box=((dm, self.box_length - dm), (dm, self.box_width - dm)), h=h, z_min=dm,
-                              top_margin=self.density_top_margin)
-            out[w]["bulk_density"] = rho
-            out[w]["observables"] = {"bulk_density": rho}
+            rho[w] = ctx.measure(w, "bulk_density", bulk_density, xb, np.zeros(len(xb)), mb,
+                                 box=((dm, self.box_length - dm), (dm, self.box_width - dm)), h=h, z_min=dm,
+                                 top_margin=self.density_top_margin)
+        return h_fill, rho
+
+    def protocol(self, ctx: RunContext, t_motion: float) -> list[dict[str, Any]]:
+        nw = ctx.num_worlds
+        box = self.remove_box()
+        out: list[dict[str, Any]] = [dict() for _ in range(nw)]
+        # Fill: settle under gravity until KE/particle < 1e-6 J or 1.5 s (spec A "Fill")
+        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
+        ctx.settle("fill_settle", t_max, t_min, box)
+        # level the surface if a levelling height is given (spec A "Fill")
+        if self.level_height is not None:
+            removed = ctx.once("level", lambda: level(ctx.sim, self.level_height))
+            for w in range(nw):
+                ctx.diag[w]["levelled_removed"] = int(removed[w])
+        # h_fill and bulk density before the lift (spec A "Measurement", "Also reported"); kept
+        # in a checkpoint, as the state they were measured on is gone after the lift
+        h_fill, rho = ctx.once("fill_measurement", lambda: self._measure_fill(ctx))
+        for w in range(nw):
+            if h_fill[w] is not None:
+                out[w]["bulk_density"] = rho[w]
+                out[w]["observables"] = {"bulk_density": rho[w]}
         # lift the baffle in +z at lift_speed until its bottom edge is at lift_to (spec A "Protocol")
         ctx.jump_clock(t_motion)
         ctx.advance("lift", self.lift_duration, box)

@@ -10,14 +10,29 @@ known when it is built. Every experiment starts its motion at ``t_motion`` = the
 largest settling time; when the fill settles earlier the state's clock is moved forward
 to ``t_motion`` (walls are at rest before their start, so nothing else depends on time).
 Reported simulated times are the phases actually simulated, without the jump.
+
+Batch checkpoints (:class:`BatchCheckpoints`, ``Experiment.run(..., checkpoints=...)``): a
+protocol is a sequence of steps (``settle``, ``advance``, ``jump_clock`` and host work wrapped
+in ``once``); between the step chunks of a ``settle`` or an ``advance`` (every
+``settle_check_interval`` / ``removal_interval`` of simulated time) the batch saves its simulation
+with :func:`warpdem.io.save_checkpoint` plus a JSON sidecar holding the completed steps' results,
+the progress of the step under way, the phase times, diagnostics and paused worlds, at most every
+``every_s`` wall seconds and once more when the protocol's last step has finished. A re-run of the
+same batch (same experiment, settings, parameter sets, fills, code and model) loads it and
+continues from that chunk; its results equal the uninterrupted run's (bitwise on the CPU).
 """
 from __future__ import annotations
 
+import base64
 import dataclasses
+import hashlib
+import json
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
@@ -26,13 +41,14 @@ import trimesh
 import warpdem as wd
 from warpdem import ConfigError, ContactOverflowError, StabilityError
 
-from ..filling import (FillResult, active_bodies, active_spheres, add_fill, pour_fill, random_fill, run_for,
-                       settle)
+from warpdem.solver import SettleReport
+
+from ..filling import FillResult, active_bodies, active_spheres, add_fill, pour_fill, random_fill, run_for
 from ..materials import BulkMaterial, sample_particles
 from ..measurement import MeasurementError
 
-__all__ = ["Experiment", "ExperimentResult", "RunContext", "normalize_parameter_sets", "rectangle",
-           "fit_to_dict"]
+__all__ = ["BatchCheckpoints", "Experiment", "ExperimentResult", "RunContext", "clear_checkpoints",
+           "normalize_parameter_sets", "rectangle", "fit_to_dict"]
 
 G = 9.81
 
@@ -174,12 +190,211 @@ class ExperimentResult:
         return _jsonable(d)
 
 
+# --------------------------------------------------------------------------- batch checkpoints
+CHECKPOINT_FORMAT = 1
+
+
+@dataclass(frozen=True)
+class BatchCheckpoints:
+    """Where and how often a batch of worlds saves its simulation (``Experiment.run(...,
+    checkpoints=...)``; module docstring, "Batch checkpoints").
+
+    folder: checkpoint folder; one slot per batch (per process chunk on the CPU), named
+        ``<experiment>-<scale>-fill<first fill index>``: ``.json`` sidecar + ``.<steps>.npz``.
+    every_s: wall-clock seconds [s] between saves (a save happens at the first chunk boundary
+        after that; 0: at every chunk boundary). The protocol's end is always saved.
+    keep_until_recorded: leave a finished batch's checkpoint in place; the caller removes it
+        with :func:`clear_checkpoints` once it has recorded the results (a campaign). False:
+        :meth:`Experiment.run` removes it when it returns the results.
+
+    Not checkpointed: a run that writes VTK (``vtk_every``; its series cannot be resumed), and
+    nothing is saved once a world of the batch was frozen as unstable (a resume starts from the
+    last checkpoint before and meets the same failure)."""
+
+    folder: Path
+    every_s: float = 120.0
+    keep_until_recorded: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "folder", Path(self.folder))
+        if not (isinstance(self.every_s, (int, float)) and math.isfinite(self.every_s) and self.every_s >= 0):
+            raise ConfigError(f"checkpoints: every_s must be a finite number of seconds >= 0, got {self.every_s!r}")
+
+
+def clear_checkpoints(folder: str | os.PathLike) -> int:
+    """Remove every batch checkpoint (sidecars, ``.npz`` files, temporary files) from ``folder``;
+    returns how many files were removed (0 for a missing folder)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0
+    n = 0
+    for f in folder.iterdir():
+        if f.is_file() and (f.suffix in (".json", ".npz") or ".tmp" in f.name):
+            f.unlink(missing_ok=True)
+            n += 1
+    return n
+
+
+def _encode(x: Any) -> Any:
+    """JSON-able copy of protocol state; numpy arrays as exact base64 (dtype, shape kept)."""
+    if isinstance(x, np.ndarray):
+        a = np.ascontiguousarray(x)
+        return {"__ndarray__": base64.b64encode(a.tobytes()).decode("ascii"), "dtype": a.dtype.str,
+                "shape": list(a.shape)}
+    if isinstance(x, dict):
+        return {"__dict__": [[_encode(k), _encode(v)] for k, v in x.items()]}
+    if isinstance(x, (list, tuple)):
+        return [_encode(v) for v in x]
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    return x
+
+
+def _decode(x: Any) -> Any:
+    if isinstance(x, dict):
+        if "__ndarray__" in x:
+            return np.frombuffer(base64.b64decode(x["__ndarray__"]), dtype=np.dtype(x["dtype"])).reshape(x["shape"]).copy()
+        return {_decode(k): _decode(v) for k, v in x["__dict__"]}
+    if isinstance(x, list):
+        return [_decode(v) for v in x]
+    return x
+
+
+def _write_atomic_bytes(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+
+
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+class _BatchCheckpoint:
+    """One batch's checkpoint slot: the batch fingerprint, saving and loading."""
+
+    def __init__(self, options: BatchCheckpoints, experiment: "Experiment", identity: Mapping[str, Any]) -> None:
+        from ..campaign_records import code_version
+
+        self.options = options
+        self.folder = options.folder
+        self.slot = f"{experiment.name}-{experiment.scale}-fill{int(experiment.first_fill_index)}"
+        self.sidecar = self.folder / f"{self.slot}.json"
+        # what makes a batch this batch: the experiment and every setting (seed, fill indices),
+        # the parameter sets, and the code; the model's fingerprint is checked when loading
+        self.identity = _jsonable({"format": CHECKPOINT_FORMAT, "experiment": experiment.name,
+                                   "settings": experiment.settings(), **identity, "code": code_version()})
+        self.fingerprint = hashlib.sha256(json.dumps(self.identity, sort_keys=True).encode()).hexdigest()[:20]
+        self.notes: list[str] = []
+        self.saves = 0
+        self.save_s = 0.0
+        self.bytes = 0
+        self.resumed: dict[str, Any] | None = None
+
+    def note(self, msg: str) -> None:
+        """A checkpoint note: printed (stderr) and kept in the results' timing."""
+        self.notes.append(msg)
+        print(f"[checkpoint] {msg}", file=sys.stderr, flush=True)
+
+    def remove(self) -> None:
+        """Remove this slot's sidecar and every ``.npz`` and temporary file of it."""
+        if not self.folder.is_dir():
+            return
+        for f in self.folder.glob(f"{self.slot}.*"):
+            f.unlink(missing_ok=True)
+
+    def read(self) -> dict[str, Any] | None:
+        """This batch's saved sidecar, or None (no checkpoint; another batch's or a damaged one
+        is reported and removed)."""
+        if not self.sidecar.exists():
+            return None
+        try:
+            saved = json.loads(self.sidecar.read_text())
+            fp = saved["batch_fingerprint"]
+        except (ValueError, KeyError, TypeError, OSError) as exc:
+            self.note(f"{self.sidecar} is damaged ({type(exc).__name__}: {exc}); removed, the batch starts over")
+            self.remove()
+            return None
+        if fp != self.fingerprint:
+            self.note(f"{self.sidecar} belongs to another batch (fingerprint {fp}, this batch {self.fingerprint}: "
+                      "other parameters, settings, fills or code); not used, removed")
+            self.remove()
+            return None
+        return saved
+
+    def load(self, saved: Mapping[str, Any], model: wd.Model, device: str | None, max_neighbours: int | None):
+        """The saved Simulation on ``model`` (same fingerprint), or None (reported, removed)."""
+        from warpdem.io import load_checkpoint
+
+        npz = self.folder / str(saved.get("npz", ""))
+        try:
+            if saved.get("model_fingerprint") != model.fingerprint:
+                raise ConfigError(f"saved from model {saved.get('model_fingerprint')}, this batch builds model "
+                                  f"{model.fingerprint}")
+            digest = hashlib.sha256(npz.read_bytes()).hexdigest() if npz.is_file() else None
+            if digest != saved.get("npz_sha256"):
+                raise ConfigError(f"{npz.name} is missing or does not match its sidecar (damaged)")
+            sim = load_checkpoint(npz, device, model=model, max_neighbours=max_neighbours)
+        except (ConfigError, OSError) as exc:
+            self.note(f"{self.sidecar}: cannot be resumed ({exc}); removed, the batch starts over")
+            self.remove()
+            return None
+        return sim
+
+    def save(self, ctx: "RunContext", inner: Mapping[str, Any] | None) -> None:
+        """Save ``ctx``'s simulation and protocol state (atomically: the ``.npz`` under a new
+        name, then the sidecar naming it replaces the old one; the old ``.npz`` is removed)."""
+        from warpdem.io import save_checkpoint
+
+        t0 = time.perf_counter()
+        sim = ctx.sim
+        self.folder.mkdir(parents=True, exist_ok=True)
+        npz = self.folder / f"{self.slot}.{sim.steps}.npz"
+        tmp = save_checkpoint(self.folder / f"{self.slot}.{sim.steps}.tmp.npz", sim)
+        _fsync_file(tmp)
+        os.replace(tmp, npz)
+        paused = sim.solver.paused_worlds
+        side = {"format": CHECKPOINT_FORMAT, "batch_fingerprint": self.fingerprint, "batch": self.identity,
+                "model_fingerprint": sim.model.fingerprint, "npz": npz.name,
+                "npz_sha256": hashlib.sha256(npz.read_bytes()).hexdigest(), "steps": int(sim.steps),
+                "time_s": sim.time, "dt_s": sim.dt, "capacities": ctx.capacities, "retries": ctx.retries,
+                "protocol": {"done": ctx._done, "inner": _encode(inner) if inner is not None else None,
+                             "phases": ctx.phases, "diag": _encode(ctx.diag), "errors": ctx.errors,
+                             "paused": [bool(v) for v in paused]},
+                "saved": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+        _write_atomic_bytes(self.sidecar, json.dumps(side).encode())
+        for old in self.folder.glob(f"{self.slot}.*.npz"):
+            if old.name != npz.name:
+                old.unlink(missing_ok=True)
+        self.saves += 1
+        self.bytes = npz.stat().st_size + self.sidecar.stat().st_size
+        self.save_s += time.perf_counter() - t0
+
+    def summary(self) -> dict[str, Any]:
+        return {"folder": str(self.folder), "slot": self.slot, "fingerprint": self.fingerprint,
+                "every_s": self.options.every_s, "saves": self.saves, "save_s": round(self.save_s, 3),
+                "bytes": self.bytes, "resumed": self.resumed, "notes": list(self.notes)}
+
+
 # --------------------------------------------------------------------------- run context
 class RunContext:
     """What a protocol needs during a run: the simulation, phase bookkeeping, read-backs."""
 
     def __init__(self, experiment: "Experiment", sim: wd.Simulation, fills: list[FillResult],
-                 progress: bool) -> None:
+                 progress: bool, checkpoint: _BatchCheckpoint | None = None,
+                 resume: Mapping[str, Any] | None = None, capacities: Mapping[str, Any] | None = None,
+                 retries: list | None = None) -> None:
         self.exp = experiment
         self.sim = sim
         self.model = sim.model
@@ -190,6 +405,24 @@ class RunContext:
         self.diag: list[dict[str, Any]] = [dict() for _ in range(self.num_worlds)]
         self.errors: list[str | None] = [None] * self.num_worlds
         self._t0 = time.perf_counter()
+        # protocol steps (module docstring, "Batch checkpoints"): the results of the completed
+        # ones (JSON-able), and on a resume the saved protocol state to continue from
+        self.checkpoint = checkpoint
+        self.capacities = dict(capacities or {})
+        self.retries = list(retries or [])
+        self._done: list[dict[str, Any]] = []
+        self._n_steps = 0
+        self._resume: dict[str, Any] | None = None
+        self._last_save = time.perf_counter()
+        if resume is not None:
+            self._done = list(resume["done"])
+            self._resume = dict(resume)
+            self.phases = dict(resume["phases"])
+            self.diag = _decode(resume["diag"])
+            self.errors = list(resume["errors"])
+            paused = np.asarray(resume["paused"], dtype=bool)
+            if paused.any():  # the solver's paused flags are not part of a warpdem checkpoint
+                sim.pause_worlds(paused)
         self.vtk = None  # VTK time series of one world, when the experiment asks for it (vtk_every)
         if experiment.vtk_every is not None:
             from warpdem.io import VtkSeries
@@ -236,24 +469,153 @@ class RunContext:
                 del sim.run
         return recording()
 
-    def settle(self, name: str, max_time: float, min_time: float = 0.0, remove_box=None):
-        """Spec "settled" criterion (KE per particle < ``ke_per_particle`` or ``max_time``)."""
+    # ------------------------------------------------------------------ protocol steps
+    def _step(self, label: str) -> tuple[str, Any]:
+        """Enter the next protocol step: ``("new", None)``, ``("done", its saved result)`` when a
+        resumed batch completed it before, or ``("continue", saved progress)`` for the step the
+        checkpoint was taken in."""
+        i = self._n_steps
+        self._n_steps += 1
+        r = self._resume
+        if r is None:
+            return "new", None
+        if i < len(self._done):
+            if self._done[i]["label"] != label:
+                raise RuntimeError(f"{self.exp.name}: resumed protocol step {i} is {label!r}, the checkpoint "
+                                   f"recorded {self._done[i]['label']!r}")
+            return "done", _decode(self._done[i]["value"])
+        self._resume = None
+        inner = r.get("inner")
+        if inner is not None:
+            inner = _decode(inner)
+            if inner.get("label") != label:
+                raise RuntimeError(f"{self.exp.name}: resumed protocol step {i} is {label!r}, the checkpoint "
+                                   f"was taken in {inner.get('label')!r}")
+            return "continue", inner
+        return "new", None
+
+    def _finish_step(self, label: str, value: Any) -> Any:
+        self._done.append({"label": label, "value": _encode(value)})
+        return value
+
+    def _maybe_save(self, inner: Mapping[str, Any]) -> None:
+        """Save a checkpoint (between step chunks) when ``every_s`` wall seconds have passed
+        since the last one; never once a world was frozen as unstable."""
+        ck = self.checkpoint
+        if ck is None or time.perf_counter() - self._last_save < ck.options.every_s:
+            return
+        self.save_checkpoint(inner)
+
+    def save_checkpoint(self, inner: Mapping[str, Any] | None = None) -> None:
+        """Save now (``inner``: progress of the step under way; None: between steps)."""
+        if self.checkpoint is None or self.sim.failed_worlds():
+            return
+        self.checkpoint.save(self, inner)
+        self._last_save = time.perf_counter()
+        self.log(f"checkpoint saved at step {self.sim.steps} ({self.checkpoint.sidecar})")
+
+    def once(self, label: str, fn):
+        """Host work between simulated phases (a measurement, a levelling, a lift plan): run
+        ``fn()`` and keep its result (JSON-able, numpy arrays allowed) in the checkpoint; a
+        resumed batch that had done it returns the kept result without calling ``fn``."""
+        how, saved = self._step(label)
+        if how == "done":
+            return saved
+        return self._finish_step(label, fn())
+
+    def settle(self, name: str, max_time: float | np.ndarray, min_time: float | np.ndarray = 0.0,
+               remove_box=None) -> SettleReport:
+        """Spec "settled" criterion (KE per particle < ``ke_per_particle`` [J] after
+        ``min_time``, or ``max_time`` [s]; per world): :meth:`warpdem.Simulation.settle`'s loop
+        (same operations in the same order), with checkpoints between its chunks."""
+        label = f"settle:{name}"
+        how, saved = self._step(label)
+        if how == "done":
+            return SettleReport(saved["time"], saved["settled"], np.asarray(saved["ke"]), saved["removed"],
+                                saved["failed"])
+        sim, exp = self.sim, self.exp
+        nw = self.num_worlds
+        max_w = np.broadcast_to(np.asarray(max_time, dtype=float), (nw,))
+        min_w = np.broadcast_to(np.asarray(min_time, dtype=float), (nw,))
+        if np.any(max_w < 0) or np.any(min_w < 0):
+            raise ConfigError(f"settle: times must be >= 0, got min {min_time}, max {max_time}")
+        chunk = max(1, int(round(exp.settle_check_interval / sim.dt)))
+        n_max = np.round(max_w / sim.dt).astype(int)
+        worlds = self.model.host["body_world"]
+        if how == "continue":
+            done, removed = int(saved["done"]), int(saved["removed"])
+            ke_report = np.asarray(saved["ke_report"], dtype=float)
+            paused, met = np.asarray(saved["paused"], dtype=bool), np.asarray(saved["met"], dtype=bool)
+        else:
+            done, removed = 0, 0
+            ke_report = np.zeros(nw)
+            paused, met = np.zeros(nw, dtype=bool), np.zeros(nw, dtype=bool)
+        failed: dict[int, str] = {}
         with self._recording_vtk():
-            rep = settle(self.sim, self.exp.ke_per_particle, max_time, min_time, self.exp.settle_check_interval,
-                     remove_box)
+            try:
+                while not paused.all():
+                    k = int(min(chunk, n_max[~paused].max() - done))
+                    if k > 0:
+                        sim.run(k, check_every=k)
+                        failed = sim.failed_worlds()
+                        done += k
+                        if remove_box is not None:
+                            removed += sim.remove_outside(*remove_box)
+                    bad = np.zeros(nw, dtype=bool)
+                    bad[list(failed)] = True
+                    active = np.bincount(worlds, weights=sim.state.body_active.numpy(), minlength=nw)
+                    ke = sim.kinetic_energy() / np.maximum(active, 1)
+                    ke_report[~paused] = ke[~paused]
+                    now_met = ~paused & ~bad & (done * sim.dt >= min_w - 1e-12) & (ke < exp.ke_per_particle)
+                    met |= now_met
+                    stop = now_met | (~paused & ((done >= n_max) | bad))
+                    if stop.any():
+                        paused |= stop
+                        sim.pause_worlds(paused)
+                    if not paused.all():
+                        self._maybe_save(dict(label=label, done=done, removed=removed, ke_report=ke_report,
+                                              paused=paused, met=met))
+            finally:
+                sim.resume_worlds()
+        rep = SettleReport(done * sim.dt, bool(met.all()), ke_report, removed, failed)
+        self._finish_step(label, dict(time=rep.time, settled=rep.settled, ke=ke_report, removed=removed,
+                                      failed=failed))
         self._phase(name, rep.time)
-        for w in range(self.num_worlds):
+        for w in range(nw):
             self.diag[w][f"{name}_ke_per_particle_J"] = float(rep.ke_per_particle[w])
-            self.diag[w][f"{name}_settled"] = bool(rep.ke_per_particle[w] < self.exp.ke_per_particle)
+            self.diag[w][f"{name}_settled"] = bool(rep.ke_per_particle[w] < exp.ke_per_particle)
         self.log(f"{name}: {rep.time:.3f} s simulated, settled={rep.settled}, max KE/particle "
                  f"{rep.ke_per_particle.max():.2e} J")
         return rep
 
     def advance(self, name: str, duration: float, remove_box=None) -> None:
+        """Advance ``duration`` [s] (to the nearest step), removing bodies outside ``remove_box``
+        every ``removal_interval`` [s] (:func:`calibration.filling.run_for`), with checkpoints
+        between those chunks (none without a ``remove_box``)."""
+        label = f"advance:{name}"
+        how, saved = self._step(label)
+        if how == "done":
+            return
+        sim = self.sim
+        if how == "continue":
+            steps, done, removed = int(saved["steps"]), int(saved["done"]), int(saved["removed"])
+        else:
+            steps, done, removed = int(round(duration / sim.dt)), 0, 0
         with self._recording_vtk():
-            steps, removed = run_for(self.sim, duration, remove_box, self.exp.removal_interval)
-        self._phase(name, steps * self.sim.dt)
-        self.log(f"{name}: {steps * self.sim.dt:.3f} s simulated, {removed} particle(s) removed")
+            if remove_box is None or steps <= 0:
+                steps, removed = run_for(sim, duration, remove_box, self.exp.removal_interval)
+            else:
+                every = max(1, int(round(self.exp.removal_interval / sim.dt)))
+                while done < steps:
+                    k = min(every, steps - done)
+                    sim.run(k, check_every=k)
+                    removed += sim.remove_outside(*remove_box)
+                    done += k
+                    if done < steps:
+                        self._maybe_save(dict(label=label, steps=steps, done=done, removed=removed))
+        self._finish_step(label, dict(steps=steps, removed=removed))
+        self._phase(name, steps * sim.dt)
+        self.log(f"{name}: {steps * sim.dt:.3f} s simulated, {removed} particle(s) removed")
 
     def advance_to(self, name: str, t: float, remove_box=None) -> None:
         """Advance until the clock reads ``t`` [s] (to the nearest step)."""
@@ -261,6 +623,10 @@ class RunContext:
 
     def jump_clock(self, t: float) -> None:
         """Move the clock forward to ``t`` [s] (module docstring, "Protocol clock")."""
+        how, _ = self._step("jump_clock")
+        if how == "done":
+            return
+        self._finish_step("jump_clock", float(t))
         now = self.sim.time
         if t < now - 0.5 * self.sim.dt:
             raise RuntimeError(f"protocol clock: cannot move back from {now} s to {t} s")
@@ -524,8 +890,10 @@ class Experiment:
         per = [self.fill_settle_times([fills[w if len(fills) > 1 else 0]]) for w in range(num_worlds)]
         return np.array([p[0] for p in per]), np.array([p[1] for p in per])
 
-    def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int) -> list[ExperimentResult]:
-        """:meth:`run` with the worlds split into ``nproc`` contiguous chunks, one process each."""
+    def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int,
+                          checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
+        """:meth:`run` with the worlds split into ``nproc`` contiguous chunks, one process each
+        (each chunk checkpoints into its own slot)."""
         import concurrent.futures
         import multiprocessing
 
@@ -536,7 +904,7 @@ class Experiment:
         # the workers import the user's sub-model modules before they unpickle the experiment
         with concurrent.futures.ProcessPoolExecutor(max_workers=nproc, mp_context=ctx, initializer=_load_worker_plugins,
                                                     initargs=(tuple(self.plugins),)) as pool:
-            futures = [pool.submit(_run_chunk, self, sets, device, start) for start, sets in chunks]
+            futures = [pool.submit(_run_chunk, self, sets, device, start, checkpoints) for start, sets in chunks]
             parts = [f.result() for f in futures]
         wall = round(time.perf_counter() - wall0, 3)
         results = []
@@ -579,7 +947,8 @@ class Experiment:
         return model, sim, dt, limits
 
     def run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None = None,
-            progress: bool = False, processes: int | str | None = 1) -> list[ExperimentResult]:
+            progress: bool = False, processes: int | str | None = 1,
+            checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
         """Run the experiment, one world per parameter set (contact parameters by the model's
         names, e.g. ``mu_s_pp``); returns one :class:`ExperimentResult` per world, in order.
 
@@ -589,15 +958,34 @@ class Experiment:
         results in any split (settled worlds wait at rest); with a fill per world the time step
         and wall height follow each chunk's fills, so results can differ within the fill scatter.
         Ignored on CUDA, where one launch already runs every world. Scripts that use
-        processes > 1 need the ``if __name__ == "__main__":`` guard (spawned interpreters)."""
+        processes > 1 need the ``if __name__ == "__main__":`` guard (spawned interpreters).
+
+        checkpoints: save the batch's simulation into ``checkpoints.folder`` while it runs and
+        continue a saved one of this very batch (:class:`BatchCheckpoints`; module docstring).
+        What was resumed, saves, their time [s] and size [bytes] are in ``timing["checkpoint"]``;
+        the checkpoint is removed when the results are returned (unless
+        ``keep_until_recorded``). Not with ``vtk_every`` (a VTK series is not resumable)."""
         nproc = cpu_processes(processes, device)
         n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
+        ck = checkpoints if self.vtk_every is None else None
         if nproc > 1 and n_sets > 1 and self.vtk_every is None:
-            return self._run_in_processes(list(parameter_sets), device, min(nproc, n_sets))
-        return self._run(parameter_sets, device, progress)
+            inner = dataclasses.replace(ck, keep_until_recorded=True) if ck is not None else None
+            results = self._run_in_processes(list(parameter_sets), device, min(nproc, n_sets), inner)
+        else:
+            results = self._run(parameter_sets, device, progress, ck)
+        if ck is not None and not ck.keep_until_recorded:
+            for slot in {(r.timing.get("checkpoint") or {}).get("slot") for r in results} - {None}:
+                for f in ck.folder.glob(f"{slot}.*"):
+                    f.unlink(missing_ok=True)
+        return results
+
+    def checkpoint_identity(self) -> dict[str, Any]:
+        """What, besides the settings and parameter sets, makes a batch this batch (override:
+        e.g. the drum's per-world speeds)."""
+        return {}
 
     def _run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None,
-             progress: bool) -> list[ExperimentResult]:
+             progress: bool, checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
         """:meth:`run` in this process."""
         wall0 = time.perf_counter()
         law = self.contact_law
@@ -620,12 +1008,37 @@ class Experiment:
         _, t_motion = self.fill_settle_times(fills)
         max_contacts, max_neighbours = max(int(self.max_contacts), _contact_slots(materials)), self.max_neighbours
         retries: list[dict[str, Any]] = []
+        checkpoint = saved = None
+        if checkpoints is not None and self.vtk_every is None:
+            checkpoint = _BatchCheckpoint(checkpoints, self, {
+                "parameter_sets": [{**a, **b} for a, b in zip(sets, shapes)], "contact_defaults": defaults,
+                **self.checkpoint_identity()})
+            saved = checkpoint.read()
+            if saved is not None:  # the slot capacities the saved run had grown to
+                max_contacts = int(saved["capacities"]["max_contacts"])
+                max_neighbours = saved["capacities"]["max_neighbours"]
+                retries = list(saved.get("retries") or [])
         while True:
             model, sim, dt, limits = self._build_model(law, material, fills, sets, defaults, t_motion, device,
                                                        max_contacts, max_neighbours)
+            resume = None
+            if saved is not None:
+                loaded = checkpoint.load(saved, model, device, sim.solver.max_neighbours)
+                if loaded is not None:
+                    sim, resume = loaded, saved["protocol"]
+                    checkpoint.resumed = {"step": int(sim.steps), "time_s": round(sim.time, 9),
+                                          "protocol_step": len(resume["done"]),
+                                          "in_step": _decode(resume["inner"])["label"] if resume.get("inner")
+                                          else None}
+                    checkpoint.note(f"{checkpoint.slot}: continuing from step {sim.steps} (t = {sim.time:.3f} s, "
+                                    f"{len(resume['done'])} protocol step(s) done)")
+                saved = None
+            steps_before = int(sim.steps)
             # an unstable world is frozen and failed alone; the others of the batch run on
             sim.on_unstable = "freeze"
-            ctx = RunContext(self, sim, fills, progress)
+            ctx = RunContext(self, sim, fills, progress, checkpoint=checkpoint, resume=resume,
+                             capacities={"max_contacts": max_contacts, "max_neighbours": max_neighbours},
+                             retries=retries)
             ctx.log(f"{nw} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, dt={dt:.3g} s "
                     f"(limit {limits.limit:.3g} s)")
             if not retries:
@@ -635,6 +1048,11 @@ class Experiment:
             fatal = None
             try:
                 outcome = self.protocol(ctx, t_motion)
+                if ctx._resume is not None and ctx._n_steps < len(ctx._done):
+                    raise RuntimeError(f"{self.name}: the protocol ran {ctx._n_steps} steps, its checkpoint "
+                                       f"recorded {len(ctx._done)}")
+                if ctx._resume is None:  # the end (unless a finished checkpoint was loaded as it is)
+                    ctx.save_checkpoint(None)
             except ContactOverflowError as exc:
                 fatal = f"{type(exc).__name__}: {exc}"
                 if len(retries) < int(self.overflow_retries):
@@ -657,13 +1075,16 @@ class Experiment:
         sim_s = time.perf_counter() - sim0
         unstable = sim.failed_worlds()
         timing = {"wall_s": round(time.perf_counter() - wall0, 3), "build_s": round(build_s, 3),
-                  "simulate_s": round(sim_s, 3), "steps": int(sim.steps), "dt_s": dt,
+                  "simulate_s": round(sim_s, 3), "steps": int(sim.steps),
+                  "steps_this_run": int(sim.steps) - steps_before, "dt_s": dt,
                   "simulated_s": round(sum(ctx.phases.values()), 6),
                   "phases_s": {k: round(v, 6) for k, v in ctx.phases.items()},
                   "worlds": nw, "spheres": int(model.num_spheres), "bodies": int(model.num_bodies),
                   "spheres_per_world": int(model.num_spheres // nw), "device": str(model.device),
                   "max_contacts": int(model.max_contacts), "max_neighbours": int(sim.solver.max_neighbours),
                   "retries": retries, "note": "timing is for the whole run (all worlds together, retries included)"}
+        if checkpoint is not None:
+            timing["checkpoint"] = checkpoint.summary()
         protocol = {"scale": self.scale, "settings": self.settings(), "deviations_from_paper": self.deviations_from_paper(),
                     "contact_law": law.describe(), "material": material.describe(), "t_motion_start_s": t_motion,
                     "fill": {"particles_per_world": int(fills[0].sample.n),
@@ -759,10 +1180,11 @@ def _load_worker_plugins(plugins: tuple[str, ...]) -> None:
         load_plugins(list(plugins))
 
 
-def _run_chunk(exp: Experiment, parameter_sets: list, device: str | None, first_world: int) -> list[ExperimentResult]:
+def _run_chunk(exp: Experiment, parameter_sets: list, device: str | None, first_world: int,
+               checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
     """Worker of :meth:`Experiment._run_in_processes`: worlds ``first_world ...`` of a run."""
     import warp as wp
 
     wp.config.quiet = True
     part = dataclasses.replace(exp, first_fill_index=exp.first_fill_index + first_world)
-    return part.run(parameter_sets, device=device, progress=False, processes=1)
+    return part.run(parameter_sets, device=device, progress=False, processes=1, checkpoints=checkpoints)

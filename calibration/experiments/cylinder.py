@@ -109,6 +109,20 @@ class HollowCylinder(Experiment):
         return (-s, -s, self.removal_z), (s, s, 100.0)
 
     # ------------------------------------------------------------------ protocol (spec C)
+    def _lift_plan(self, ctx: RunContext) -> float:
+        """Lift time [s]: until the bottom edge clears the pile top (highest active top of all
+        worlds) (spec C "Protocol"); a world the engine froze as unstable does not steer the lift."""
+        active = ctx.sim.state.body_active.numpy() != 0
+        tops = body_tops(ctx.sim)
+        live = active & ~np.isin(ctx.model.host["body_world"], list(ctx.sim.failed_worlds()))
+        pile_top = float(tops[live if live.any() else active].max())
+        material = self.bulk_material()
+        clearance = self.lift_clearance if self.lift_clearance is not None else 2.0 * material.max_bounding_radius
+        for w in range(ctx.num_worlds):
+            sel = active & (ctx.model.host["body_world"] == w)
+            ctx.diag[w]["fill_top_m"] = float(tops[sel].max())
+        return (pile_top + clearance) / self.lift_speed
+
     def protocol(self, ctx: RunContext, t_motion: float) -> list[dict[str, Any]]:
         nw = ctx.num_worlds
         box = self.remove_box()
@@ -116,21 +130,10 @@ class HollowCylinder(Experiment):
         t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
         ctx.settle("fill_settle", t_max, t_min, box)
         if self.level_height is not None:
-            removed = level(ctx.sim, self.level_height)
+            removed = ctx.once("level", lambda: level(ctx.sim, self.level_height))
             for w in range(nw):
                 ctx.diag[w]["levelled_removed"] = int(removed[w])
-        # lift until the bottom edge clears the pile top (highest active top of all worlds) (spec C "Protocol");
-        # a world the engine froze as unstable does not steer the lift
-        active = ctx.sim.state.body_active.numpy() != 0
-        tops = body_tops(ctx.sim)
-        live = active & ~np.isin(ctx.model.host["body_world"], list(ctx.sim.failed_worlds()))
-        pile_top = float(tops[live if live.any() else active].max())
-        material = self.bulk_material()
-        clearance = self.lift_clearance if self.lift_clearance is not None else 2.0 * material.max_bounding_radius
-        lift_time = (pile_top + clearance) / self.lift_speed
-        for w in range(nw):
-            sel = active & (ctx.model.host["body_world"] == w)
-            ctx.diag[w]["fill_top_m"] = float(tops[sel].max())
+        lift_time = ctx.once("lift_plan", lambda: self._lift_plan(ctx))
         ctx.jump_clock(t_motion)
         ctx.advance("lift", lift_time, box)
         # then run until settled (spec C "Protocol")

@@ -127,7 +127,7 @@ class RotatingDrum(Experiment):
         return {"mass": self.fill_fraction * volume * phi * material.particle.density}
 
     def _run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None,
-             progress: bool) -> list[ExperimentResult]:
+             progress: bool, checkpoints=None) -> list[ExperimentResult]:
         """As :meth:`Experiment.run`; a parameter set may also give the world's ``rpm``."""
         sets = normalize_parameter_sets(parameter_sets, [*self.parameter_names, "rpm"])
         rpms = [float(s.pop("rpm", self.rpm)) for s in sets]
@@ -136,7 +136,7 @@ class RotatingDrum(Experiment):
                 raise ConfigError(f"drum: parameter set {w}: rpm must be > 0, got {v}")
         self._world_rpm = rpms
         try:
-            results = super()._run(sets, device, progress)
+            results = super()._run(sets, device, progress, checkpoints)
         finally:
             self._world_rpm = None
         given = normalize_parameter_sets(parameter_sets, [*self.parameter_names, "rpm"])
@@ -144,6 +144,10 @@ class RotatingDrum(Experiment):
             if "rpm" in g:
                 r.parameters["rpm"] = g["rpm"]
         return results
+
+    def checkpoint_identity(self) -> dict[str, Any]:
+        """The per-world drum speeds [rpm] (given in the parameter sets) are part of a batch."""
+        return {"world_rpm": self.world_rpm(0) if getattr(self, "_world_rpm", None) is not None else None}
 
     def world_rpm(self, num_worlds: int) -> list[float]:
         rpms = getattr(self, "_world_rpm", None)
@@ -181,14 +185,20 @@ class RotatingDrum(Experiment):
                  for rpm in rpms]
         snaps: dict[tuple[float, int], tuple[np.ndarray, np.ndarray]] = {}
         last = np.array([tw.max() for tw in times])
+
+        def snapshot(t: float) -> list:
+            """Sphere centres and radii [m] of the worlds that take a frame at ``t`` (else None)."""
+            x_all = ctx.sim.sphere_positions()
+            return [ctx.world_spheres(w, x_all) if t in times[w] else None for w in range(nw)]
+
         for t in np.unique(np.concatenate(times)):
             ctx.advance("rotation", t - ctx.sim.time, box)
-            x_all = ctx.sim.sphere_positions()
-            for w in range(nw):
-                if t in times[w]:
-                    snaps[(float(t), w)] = ctx.world_spheres(w, x_all)
+            # the frames are part of a checkpoint: a resumed batch gets them back, not re-taken
+            for w, frame in enumerate(ctx.once("snapshot", lambda: snapshot(t))):
+                if frame is not None:
+                    snaps[(float(t), w)] = tuple(frame)
             # a faster drum has its last frame sooner: hold its world at rest (no contact work)
-            # while the slower ones turn on
+            # while the slower ones turn on (a resumed batch pauses them again: same flags)
             done = last <= t
             if done.any() and not done.all():
                 ctx.sim.pause_worlds(done)
