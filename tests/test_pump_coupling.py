@@ -2,6 +2,7 @@
 water (Di Felice with the local voidage, Schiller-Naumann), relaxation to a uniform stream, the
 added-mass time constant, the undisturbed-flow force, buoyancy, the voidage grid."""
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,3 +132,103 @@ def test_bad_coupling_input_is_named():
         GridFluidForces(np.zeros((3, 3, 3)))
     with pytest.raises(wd.ConfigError, match="grid_fluid.added_mass"):
         GridFluidForces(still(), added_mass=-1)
+
+
+# ----------------------------------------------------------------------------- closed-form drag, reference run
+def linear_stream(u0, shear, lower=(0.0, 0.0, 0.0), upper=(0.4, 0.4, 0.4), spacing=0.05, viscosity=MU_F):
+    """u(x) = u0 + shear @ (x - lower) [m/s], zero Du/Dt: trilinear sampling reproduces it exactly."""
+    grid = FlowGrid.uniform((0.0, 0.0, 0.0), lower, upper, spacing, viscosity=viscosity)
+    idx = np.stack(np.meshgrid(*[np.arange(n) for n in grid.shape], indexing="ij"), -1)
+    grid.velocity[...] = (np.asarray(u0) + (idx * spacing) @ np.asarray(shear).T).astype(np.float32)
+    return grid
+
+
+@pytest.mark.parametrize("drag", ["di_felice", "schiller_naumann"])
+def test_per_body_force_in_a_linear_stream_is_the_closed_form_drag(drag):
+    """Bodies at rest, no gravity, Du/Dt = 0: the first step's force on each is the drag law's
+    (1/8) C_d rho_f pi d^2 eps^(2 - chi) |u| u (Di Felice; eps from its own coarse cell) or
+    (1/8) C_d rho_f pi d^2 |u| u, C_d = 24 / Re (1 + 0.15 Re^0.687), 0.44 from Re = 1000
+    (Schiller-Naumann)."""
+    cell, u0 = 0.1, np.array([0.05, -0.02, 0.01])
+    shear = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -0.5], [0.25, 0.0, 0.0]])  # du_i/dx_j [1/s]
+    forces = GridFluidForces(linear_stream(u0, shear), drag=drag, voidage_cell=cell)
+    bodies = [((0.05, 0.05, 0.05), 0.004), ((0.25, 0.12, 0.31), 0.006), ((0.17, 0.33, 0.08), 0.001),
+              ((0.36, 0.27, 0.22), 0.005)]  # one per coarse cell; Re from 770 to 3600
+    sim = simulation(bodies, forces, gravity=(0.0, 0.0, 0.0))
+    sim.run(1)
+    got = sim.solver.body_force_context.force.numpy().astype(np.float64)
+    for (x, r), f in zip(bodies, got):
+        u = u0 + shear @ np.asarray(x)
+        d, speed = 2 * r, np.linalg.norm(u)
+        if drag == "di_felice":
+            eps = 1 - math.pi * d**3 / 6 / cell**3
+            re = RHO_F * d * eps * speed / MU_F
+            chi = 3.7 - 0.65 * math.exp(-((1.5 - math.log10(re)) ** 2) / 2)
+            cd, void = (0.63 + 4.8 / math.sqrt(re)) ** 2, eps ** (2 - chi)
+        else:
+            re = RHO_F * d * speed / MU_F
+            cd, void = (24 / re * (1 + 0.15 * re**0.687) if re < 1000 else 0.44), 1.0
+        expected = 0.125 * cd * RHO_F * math.pi * d**2 * void * speed * u
+        assert f == pytest.approx(expected, rel=1e-4, abs=1e-6 * np.linalg.norm(expected))
+
+
+REFERENCE = Path(__file__).parent / "data" / "pump_fluid_forces_reference.npz"
+
+
+def swirling_flow():
+    """A non-uniform flow with Du/Dt != 0 on [0, 0.2]^3 (grid 0.01 m) for the reference runs."""
+    grid = FlowGrid.uniform((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.2, 0.2, 0.2), 0.01)
+    x = np.stack(np.meshgrid(*[np.arange(n) * 0.01 for n in grid.shape], indexing="ij"), -1)
+    k = 2 * math.pi / 0.2
+    u = np.stack([1.0 + 0.8 * np.sin(k * x[..., 1]), 0.4 * np.cos(k * x[..., 0]), -0.2 + 0.3 * np.sin(k * x[..., 2])], -1)
+    grid.velocity[...] = u.astype(np.float32)
+    grid.acceleration[...] = np.stack([0.8 * k * np.cos(k * x[..., 1]) * u[..., 1],
+                                       -0.4 * k * np.sin(k * x[..., 0]) * u[..., 0],
+                                       0.3 * k * np.cos(k * x[..., 2]) * u[..., 2]], -1).astype(np.float32)
+    return grid
+
+
+def reference_runs(steps=30, saved=(1, 2, 3, 10, 20, 30)):
+    """Fluid force [N] after the ``saved`` steps on 2 x 27 spheres (two worlds, no contacts) in :func:`swirling_flow`:
+    two-way (Di Felice, added mass, buoyancy, pressure gradient) and one-way (Schiller-Naumann)."""
+    rng = np.random.default_rng(7)
+    g = np.arange(3) * 0.016
+    lattice = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    centres = np.concatenate([lattice + 0.056, lattice + (0.11, 0.03, 0.12)])
+    worlds = [0] * 27 + [1] * 27
+    v0 = rng.normal(0.0, 0.2, (54, 3))
+    out = {}
+    for key, kwargs in (("two_way", dict(two_way=True, relaxation=0.7)), ("one_way", dict(drag="schiller_naumann"))):
+        forces = GridFluidForces(swirling_flow(), voidage_cell=0.05, **kwargs)
+        b = wd.ModelBuilder(num_worlds=2, gravity=(0.0, 0.0, -9.81))
+        b.add_material(wd.GRAVEL)
+        for x, w, v in zip(centres, worlds, v0):
+            b.add_sphere(tuple(x), 0.005, wd.GRAVEL.name, world=w, velocity=tuple(v))
+        b.add_body_force(forces)
+        sim = wd.Simulation(b.finalize("cpu", check_overlaps=False), dt=1e-4, force=True)
+        history = []
+        for step in range(1, steps + 1):
+            sim.run(1)
+            if step in saved:
+                history.append(sim.solver.body_force_context.force.numpy().copy())
+        out[f"{key}_force"] = np.asarray(history)
+        out[f"{key}_voidage"] = forces.voidage.numpy().copy()
+        out[f"{key}_cell_velocity_change"] = forces.fluid_velocity_change()
+    return out
+
+
+@pytest.mark.filterwarnings("ignore::warpdem.StabilityWarning")
+def test_fluid_forces_match_the_saved_reference_run():
+    """Regression: forces of a short two-way and one-way run equal those saved before the
+    kernels took struct arguments (tests/data/pump_fluid_forces_reference.npz)."""
+    ref = np.load(REFERENCE)
+    got = reference_runs()
+    assert sorted(got) == sorted(ref.files)
+    for key in ref.files:
+        scale = np.abs(ref[key]).max()
+        assert scale > 0 or key == "one_way_cell_velocity_change", key
+        np.testing.assert_allclose(got[key], ref[key], rtol=1e-6, atol=1e-6 * scale, err_msg=key)
+
+
+if __name__ == "__main__":  # regenerate the reference only when the physics changes on purpose
+    np.savez(REFERENCE, **reference_runs())
