@@ -75,8 +75,8 @@ def main(argv=None):
     stages = dict(place_spheres=timed(place, device, args.repeats), hash_grid_build=timed(grid, device, args.repeats),
                   full_step=timed(full_step, device, args.repeats))
     grid()
-    stages["contact_kernel"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5), device, args.repeats)
-    stages["contact_kernel_no_walls"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5, walls_on=False), device, args.repeats)
+    stages["contact_stages"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5), device, args.repeats)
+    stages["contact_stages_no_walls"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5, walls_on=False), device, args.repeats)
     nb = wp.zeros(m.num_spheres, dtype=int, device=device)
     stages["grid_query_only"] = timed(lambda: wp.launch(count_neighbours, dim=m.num_spheres, inputs=[
         so.grid.id, s.sphere_x, m.sphere_radius, m.sphere_world, m.max_radius, nb], device=device), device, args.repeats)
