@@ -57,6 +57,7 @@ turbulence.
 from __future__ import annotations
 
 import math
+from typing import Any, Callable
 
 import numpy as np
 import warp as wp
@@ -70,6 +71,100 @@ from .flow import FlowGrid
 DRAG_LAWS = ("di_felice", "schiller_naumann")
 
 
+# ----------------------------------------------------------------------------- kernel arguments
+@wp.struct
+class BodyView:
+    """What the fluid kernels read of the bodies: one engine State's arrays plus fixed per-body data."""
+
+    position: wp.array(dtype=wp.vec3)  # centre of mass [m] (State.body_q)
+    velocity: wp.array(dtype=wp.vec3)  # [m/s] (State.body_v)
+    active: wp.array(dtype=int)  # 0: parked or removed, no fluid force (State.body_active)
+    world: wp.array(dtype=int)  # (Model.body_world)
+    radius: wp.array(dtype=float)  # volume-equivalent radius [m] (BodyForceContext.body_radius)
+    volume: wp.array(dtype=float)  # solid volume [m^3] (BodyForceContext.body_volume)
+
+
+@wp.struct
+class FluidField:
+    """The prescribed flow on the fine grid, node (i, j, k) at origin + (i, j, k) / inv_spacing."""
+
+    velocity: wp.array3d(dtype=wp.vec3)  # u [m/s]
+    acceleration: wp.array3d(dtype=wp.vec3)  # Du/Dt [m/s^2]
+    origin: wp.vec3  # [m]
+    inv_spacing: float  # 1 / node spacing [1/m]
+
+
+@wp.struct
+class VoidageGrid:
+    """The coarse grid, per world; flat cell index world * nx ny nz + (i ny + j) nz + k."""
+
+    origin: wp.vec3  # corner of cell (0, 0, 0) [m]
+    inv_cell: float  # 1 / cell edge [1/m]
+    nx: int
+    ny: int
+    nz: int
+    cell_volume: float  # V_c [m^3]
+    min_voidage: float  # floor of eps [-]
+    solid: wp.array(dtype=float)  # solid volume of the bodies centred in each cell [m^3], rebuilt every step
+
+
+@wp.struct
+class CellExchange:
+    """Two-way momentum exchange (module docstring): per cell and per body (1-element
+    placeholders in one-way mode, never read there)."""
+
+    inv_tau: wp.array(dtype=float)  # 1 / flow-through time per cell of one world [1/s]
+    momentum: wp.array(dtype=wp.vec3)  # P_c [kg m/s]
+    velocity_change: wp.array(dtype=wp.vec3)  # du_c = P_c / m_c [m/s]
+    drag_coefficient_sum: wp.array(dtype=float)  # B_c = sum beta_i [kg/s]
+    drag_source: wp.array(dtype=wp.vec3)  # S_c = sum beta_i (u0_i - v_i) [N]
+    body_drag_coefficient: wp.array(dtype=float)  # beta_i [kg/s]
+
+
+@wp.struct
+class FluidCoupling:
+    """Fluid properties and coupling options."""
+
+    density: float  # rho_f [kg/m^3]
+    viscosity: float  # mu_f [Pa s]
+    drag_law: int  # index into DRAG_LAWS (0: Di Felice, 1: Schiller-Naumann)
+    pressure_factor: float  # on rho_f V Du/Dt [-]
+    buoyancy_factor: float  # on -rho_f V g [-]
+    added_mass: float  # C_a [-]
+    gravity: wp.vec3  # g [m/s^2]
+    two_way: int  # 1: drag with the cell's du_c and beta_i (CellExchange)
+    relaxation: float  # r on the two-way relaxation rate 1 / tau_c [-]
+
+
+@wp.struct
+class AddedMassMemory:
+    """Per body, for the lagged particle acceleration dv/dt of the added-mass force."""
+
+    previous_velocity: wp.array(dtype=wp.vec3)  # v at the previous step [m/s]
+    seen: wp.array(dtype=int)  # 1: active at the previous step too
+
+
+class StructCache:
+    """Warp structs keyed by the arrays they are built from: built on first use, reused while
+    the same array objects come back (the solver alternates two States, so a step finds its
+    struct ready); a replaced array builds a new one. Holds at most ``size`` entries."""
+
+    def __init__(self, build: Callable[..., Any], size: int = 4) -> None:
+        self._build = build
+        self._size = size
+        self._entries: dict[tuple[int, ...], tuple[tuple, Any]] = {}
+
+    def __call__(self, *arrays: Any) -> Any:
+        key = tuple(map(id, arrays))
+        entry = self._entries.get(key)
+        if entry is None:  # the entry keeps its arrays alive, so their ids are not reused
+            if len(self._entries) >= self._size:
+                self._entries.clear()
+            entry = self._entries[key] = (arrays, self._build(*arrays))
+        return entry[1]
+
+
+# ----------------------------------------------------------------------------- device functions
 @wp.func
 def sample_vec3(field: wp.array3d(dtype=wp.vec3), origin: wp.vec3, inv_h: float, x: wp.vec3):
     """Trilinear interpolation of a node-centred vec3 grid at x, clamped to the grid."""
@@ -93,182 +188,111 @@ def sample_vec3(field: wp.array3d(dtype=wp.vec3), origin: wp.vec3, inv_h: float,
 
 
 @wp.func
-def coarse_cell(x: wp.vec3, origin: wp.vec3, inv_c: float, nx: int, ny: int, nz: int):
-    i = wp.clamp(int(wp.floor((x[0] - origin[0]) * inv_c)), 0, nx - 1)
-    j = wp.clamp(int(wp.floor((x[1] - origin[1]) * inv_c)), 0, ny - 1)
-    k = wp.clamp(int(wp.floor((x[2] - origin[2]) * inv_c)), 0, nz - 1)
-    return (i * ny + j) * nz + k
-
-
-@wp.kernel
-def scatter_solid_volume(
-    body_q: wp.array(dtype=wp.vec3),
-    body_active: wp.array(dtype=int),
-    body_world: wp.array(dtype=int),
-    body_volume: wp.array(dtype=float),
-    origin: wp.vec3,
-    inv_c: float,
-    nx: int,
-    ny: int,
-    nz: int,
-    solid: wp.array(dtype=float),
-):
-    """Sum the solid volume of active bodies per coarse cell and world (centre-in-cell)."""
-    b = wp.tid()
-    if body_active[b] == 0:
-        return
-    cell = coarse_cell(body_q[b], origin, inv_c, nx, ny, nz)
-    wp.atomic_add(solid, body_world[b] * nx * ny * nz + cell, body_volume[b])
-
-
-@wp.kernel
-def fluid_forces(
-    body_q: wp.array(dtype=wp.vec3),
-    body_v: wp.array(dtype=wp.vec3),
-    body_active: wp.array(dtype=int),
-    body_world: wp.array(dtype=int),
-    body_volume: wp.array(dtype=float),
-    body_radius: wp.array(dtype=float),
-    velocity: wp.array3d(dtype=wp.vec3),
-    acceleration: wp.array3d(dtype=wp.vec3),
-    origin: wp.vec3,
-    inv_h: float,
-    solid: wp.array(dtype=float),
-    c_origin: wp.vec3,
-    inv_c: float,
-    cnx: int,
-    cny: int,
-    cnz: int,
-    cell_volume: float,
-    rho_f: float,
-    mu_f: float,
-    drag_law: int,
-    min_voidage: float,
-    pressure_factor: float,
-    buoyancy_factor: float,
-    added_mass: float,
-    gravity: wp.vec3,
-    dt: float,
-    v_prev: wp.array(dtype=wp.vec3),
-    seen: wp.array(dtype=int),
-    two_way: int,
-    beta: wp.array(dtype=float),
-    cell_velocity_change: wp.array(dtype=wp.vec3),
-    force: wp.array(dtype=wp.vec3),
-    voidage_out: wp.array(dtype=float),
-):
-    b = wp.tid()
-    if body_active[b] == 0:
-        seen[b] = 0
-        return
-    x = body_q[b]
-    v = body_v[b]
-    vol = body_volume[b]
-    d = 2.0 * body_radius[b]
-    u = sample_vec3(velocity, origin, inv_h, x)
-    a_f = sample_vec3(acceleration, origin, inv_h, x)
-    cell = body_world[b] * cnx * cny * cnz + coarse_cell(x, c_origin, inv_c, cnx, cny, cnz)
-    eps = wp.max(1.0 - solid[cell] / cell_volume, min_voidage)
-    voidage_out[b] = eps
-    f = wp.vec3(0.0)
-    if two_way == 0:
-        f = drag_force(u - v, d, eps, rho_f, mu_f, drag_law)
-    else:  # the drag the cell's momentum sink was built with (see relax_cell_momentum)
-        f = beta[b] * (u + cell_velocity_change[cell] - v)
-    m_f = rho_f * vol
-    f = f + pressure_factor * m_f * a_f - buoyancy_factor * m_f * gravity
-    if added_mass > 0.0:
-        a_p = wp.vec3(0.0)
-        if seen[b] != 0:
-            a_p = (v - v_prev[b]) / dt
-        f = f + added_mass * m_f * (pressure_factor * a_f - a_p)
-    v_prev[b] = v
-    seen[b] = 1
-    force[b] = force[b] + f
+def cell_of(cells: VoidageGrid, world: int, x: wp.vec3):
+    """Flat index of the coarse cell of world ``world`` holding x (clamped to the grid)."""
+    i = wp.clamp(int(wp.floor((x[0] - cells.origin[0]) * cells.inv_cell)), 0, cells.nx - 1)
+    j = wp.clamp(int(wp.floor((x[1] - cells.origin[1]) * cells.inv_cell)), 0, cells.ny - 1)
+    k = wp.clamp(int(wp.floor((x[2] - cells.origin[2]) * cells.inv_cell)), 0, cells.nz - 1)
+    return world * cells.nx * cells.ny * cells.nz + (i * cells.ny + j) * cells.nz + k
 
 
 @wp.func
-def drag_force(u_rel: wp.vec3, d: float, eps: float, rho_f: float, mu_f: float, drag_law: int):
-    """The drag law chosen by ``drag_law`` (0: Di Felice, 1: Schiller-Naumann) [N]."""
-    if drag_law == 0:
-        return di_felice_drag(u_rel, d, eps, rho_f, mu_f)
-    return schiller_naumann_drag(u_rel, d, rho_f, mu_f)
+def cell_voidage(cells: VoidageGrid, c: int):
+    """eps_c = max(1 - solid_c / V_c, min_voidage) [-]."""
+    return wp.max(1.0 - cells.solid[c] / cells.cell_volume, cells.min_voidage)
 
 
 @wp.func
-def cell_fluid_mass(solid: float, cell_volume: float, min_voidage: float, rho_f: float):
-    """Fluid mass in a coarse cell [kg]: rho_f max(eps, min_voidage) V_c."""
-    return rho_f * wp.max(1.0 - solid / cell_volume, min_voidage) * cell_volume
+def cell_fluid_mass(cells: VoidageGrid, c: int, rho_f: float):
+    """Fluid mass in a coarse cell m_c = rho_f eps_c V_c [kg]."""
+    return rho_f * cell_voidage(cells, c) * cells.cell_volume
+
+
+@wp.func
+def drag_force(u_rel: wp.vec3, d: float, eps: float, fluid: FluidCoupling):
+    """The drag law chosen by ``fluid.drag_law`` (0: Di Felice, 1: Schiller-Naumann) [N]."""
+    if fluid.drag_law == 0:
+        return di_felice_drag(u_rel, d, eps, fluid.density, fluid.viscosity)
+    return schiller_naumann_drag(u_rel, d, fluid.density, fluid.viscosity)
+
+
+# ----------------------------------------------------------------------------- kernels
+@wp.kernel
+def scatter_solid_volume(bodies: BodyView, cells: VoidageGrid):
+    """Add each active body's solid volume [m^3] to ``cells.solid`` at the cell of its centre."""
+    b = wp.tid()
+    if bodies.active[b] == 0:
+        return
+    wp.atomic_add(cells.solid, cell_of(cells, bodies.world[b], bodies.position[b]), bodies.volume[b])
 
 
 @wp.kernel
-def gather_drag_exchange(
-    body_q: wp.array(dtype=wp.vec3),
-    body_v: wp.array(dtype=wp.vec3),
-    body_active: wp.array(dtype=int),
-    body_world: wp.array(dtype=int),
-    body_radius: wp.array(dtype=float),
-    velocity: wp.array3d(dtype=wp.vec3),
-    origin: wp.vec3,
-    inv_h: float,
-    solid: wp.array(dtype=float),
-    c_origin: wp.vec3,
-    inv_c: float,
-    cnx: int,
-    cny: int,
-    cnz: int,
-    cell_volume: float,
-    rho_f: float,
-    mu_f: float,
-    drag_law: int,
-    min_voidage: float,
-    cell_momentum: wp.array(dtype=wp.vec3),
-    beta: wp.array(dtype=float),
-    cell_beta: wp.array(dtype=float),
-    cell_source: wp.array(dtype=wp.vec3),
-):
+def gather_drag_exchange(bodies: BodyView, flow: FluidField, cells: VoidageGrid, fluid: FluidCoupling,
+                         exchange: CellExchange):
     """Two-way, pass 1: per body the linearised drag coefficient beta_i [kg/s] at the previous
     step's cell velocity; per cell B_c = sum beta_i [kg/s] and S_c = sum beta_i (u0_i - v_i) [N]."""
     b = wp.tid()
-    if body_active[b] == 0:
-        beta[b] = 0.0
+    if bodies.active[b] == 0:
+        exchange.body_drag_coefficient[b] = 0.0
         return
-    x = body_q[b]
-    u0 = sample_vec3(velocity, origin, inv_h, x)
-    c = body_world[b] * cnx * cny * cnz + coarse_cell(x, c_origin, inv_c, cnx, cny, cnz)
-    eps = wp.max(1.0 - solid[c] / cell_volume, min_voidage)
-    m_c = cell_fluid_mass(solid[c], cell_volume, min_voidage, rho_f)
-    slip = wp.length(u0 + cell_momentum[c] / m_c - body_v[b])
+    x = bodies.position[b]
+    v = bodies.velocity[b]
+    u0 = sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x)
+    c = cell_of(cells, bodies.world[b], x)
+    m_c = cell_fluid_mass(cells, c, fluid.density)
+    slip = wp.length(u0 + exchange.momentum[c] / m_c - v)
     probe = wp.max(slip, 1.0e-9)  # beta is the drag law's F / |u_rel|, finite as |u_rel| -> 0
-    k = drag_force(wp.vec3(probe, 0.0, 0.0), 2.0 * body_radius[b], eps, rho_f, mu_f, drag_law)[0] / probe
-    beta[b] = k
-    wp.atomic_add(cell_beta, c, k)
-    wp.atomic_add(cell_source, c, k * (u0 - body_v[b]))
+    k = drag_force(wp.vec3(probe, 0.0, 0.0), 2.0 * bodies.radius[b], cell_voidage(cells, c), fluid)[0] / probe
+    exchange.body_drag_coefficient[b] = k
+    wp.atomic_add(exchange.drag_coefficient_sum, c, k)
+    wp.atomic_add(exchange.drag_source, c, k * (u0 - v))
 
 
 @wp.kernel
-def relax_cell_momentum(
-    cell_beta: wp.array(dtype=float),
-    cell_source: wp.array(dtype=wp.vec3),
-    solid: wp.array(dtype=float),
-    inv_tau: wp.array(dtype=float),
-    ncell: int,
-    cell_volume: float,
-    min_voidage: float,
-    rho_f: float,
-    relaxation: float,
-    dt: float,
-    cell_momentum: wp.array(dtype=wp.vec3),
-    cell_velocity_change: wp.array(dtype=wp.vec3),
-):
+def relax_cell_momentum(cells: VoidageGrid, fluid: FluidCoupling, exchange: CellExchange, dt: float):
     """Two-way, pass 2 (per world and cell): P_c <- (P_c - dt S_c) / (1 + r dt / tau_c + dt B_c / m_c)
     [kg m/s]; du_c = P_c / m_c [m/s]."""
     c = wp.tid()
-    m_c = cell_fluid_mass(solid[c], cell_volume, min_voidage, rho_f)
-    p = (cell_momentum[c] - dt * cell_source[c]) / (
-        1.0 + relaxation * dt * inv_tau[c % ncell] + dt * cell_beta[c] / m_c)
-    cell_momentum[c] = p
-    cell_velocity_change[c] = p / m_c
+    m_c = cell_fluid_mass(cells, c, fluid.density)
+    inv_tau = exchange.inv_tau[c % (cells.nx * cells.ny * cells.nz)]
+    p = (exchange.momentum[c] - dt * exchange.drag_source[c]) / (
+        1.0 + fluid.relaxation * dt * inv_tau + dt * exchange.drag_coefficient_sum[c] / m_c)
+    exchange.momentum[c] = p
+    exchange.velocity_change[c] = p / m_c
+
+
+@wp.kernel
+def fluid_forces(bodies: BodyView, flow: FluidField, cells: VoidageGrid, fluid: FluidCoupling,
+                 exchange: CellExchange, memory: AddedMassMemory, dt: float, force: wp.array(dtype=wp.vec3),
+                 voidage: wp.array(dtype=float)):
+    """Add drag, undisturbed-flow force, buoyancy and added mass (module docstring) to ``force``
+    [N]; write each body's local voidage eps [-] to ``voidage``."""
+    b = wp.tid()
+    if bodies.active[b] == 0:
+        memory.seen[b] = 0
+        return
+    x = bodies.position[b]
+    v = bodies.velocity[b]
+    u = sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x)
+    a_f = sample_vec3(flow.acceleration, flow.origin, flow.inv_spacing, x)
+    c = cell_of(cells, bodies.world[b], x)
+    eps = cell_voidage(cells, c)
+    voidage[b] = eps
+    f = wp.vec3(0.0)
+    if fluid.two_way == 0:
+        f = drag_force(u - v, 2.0 * bodies.radius[b], eps, fluid)
+    else:  # the drag the cell's momentum sink was built with (see relax_cell_momentum)
+        f = exchange.body_drag_coefficient[b] * (u + exchange.velocity_change[c] - v)
+    m_f = fluid.density * bodies.volume[b]  # displaced fluid mass [kg]
+    f = f + fluid.pressure_factor * m_f * a_f - fluid.buoyancy_factor * m_f * fluid.gravity
+    if fluid.added_mass > 0.0:
+        a_p = wp.vec3(0.0)
+        if memory.seen[b] != 0:
+            a_p = (v - memory.previous_velocity[b]) / dt
+        f = f + fluid.added_mass * m_f * (fluid.pressure_factor * a_f - a_p)
+    memory.previous_velocity[b] = v
+    memory.seen[b] = 1
+    force[b] = force[b] + f
 
 
 @register_body_force
@@ -348,68 +372,95 @@ class GridFluidForces(BodyForceModel):
         return self.cell_momentum.numpy().reshape(self._num_worlds, *self._cdims, 3)
 
     def bind(self, ctx: BodyForceContext) -> None:
+        """Upload the flow, allocate the coarse-grid and per-body buffers, build the kernels'
+        structs (the per-State BodyView is built on first use, :meth:`body_view`)."""
         m = ctx.model
         dev = ctx.device
         g = self.grid
-        self._velocity = wp.array(np.ascontiguousarray(g.velocity), dtype=wp.vec3, device=dev)
-        self._acceleration = wp.array(np.ascontiguousarray(g.acceleration), dtype=wp.vec3, device=dev)
-        self._origin = wp.vec3(*np.asarray(g.origin, dtype=float))
-        self._inv_h = 1.0 / g.spacing
         c = self.values["voidage_cell"]
         self._cdims = self.coarse_shape
         self._num_worlds = m.num_worlds
-        self._c_origin = self._origin
-        self._inv_c = 1.0 / c
-        self._cell_volume = c**3
-        ncell = int(np.prod(self._cdims))
-        self._solid = wp.zeros(max(m.num_worlds * ncell, 1), dtype=float, device=dev)
-        self._v_prev = wp.array(m.initial["body_v"], dtype=wp.vec3, device=dev)
-        self._seen = wp.zeros(m.num_bodies, dtype=int, device=dev)
+        n_cells = max(m.num_worlds * int(np.prod(self._cdims)), 1)
+        self._velocity = wp.array(np.ascontiguousarray(g.velocity), dtype=wp.vec3, device=dev)
+
+        self._flow = FluidField()
+        self._flow.velocity = self._velocity
+        self._flow.acceleration = wp.array(np.ascontiguousarray(g.acceleration), dtype=wp.vec3, device=dev)
+        self._flow.origin = wp.vec3(*np.asarray(g.origin, dtype=float))
+        self._flow.inv_spacing = 1.0 / g.spacing
+
+        self._cells = VoidageGrid()
+        self._cells.origin = self._flow.origin
+        self._cells.inv_cell = 1.0 / c
+        self._cells.nx, self._cells.ny, self._cells.nz = self._cdims
+        self._cells.cell_volume = c**3
+        self._cells.min_voidage = self.values["min_voidage"]
+        self._cells.solid = wp.zeros(n_cells, dtype=float, device=dev)
+
+        self._fluid = FluidCoupling()
+        self._fluid.density = float(g.density)
+        self._fluid.viscosity = float(g.viscosity)
+        self._fluid.drag_law = DRAG_LAWS.index(self.drag)
+        self._fluid.pressure_factor = self.values["pressure_gradient"]
+        self._fluid.buoyancy_factor = self.values["buoyancy"]
+        self._fluid.added_mass = self.values["added_mass"]
+        self._fluid.gravity = ctx.gravity
+        self._fluid.two_way = int(self.two_way)
+        self._fluid.relaxation = self.relaxation
+
+        self._memory = AddedMassMemory()
+        self._memory.previous_velocity = wp.array(m.initial["body_v"], dtype=wp.vec3, device=dev)
+        self._memory.seen = wp.zeros(m.num_bodies, dtype=int, device=dev)
         self.voidage = wp.ones(m.num_bodies, dtype=float, device=dev)
+
+        self._exchange = CellExchange()
         if self.two_way:
-            n = max(m.num_worlds * ncell, 1)
             idx = np.stack(np.meshgrid(*[np.arange(k) for k in self._cdims], indexing="ij"), -1).reshape(-1, 3)
             centres = np.asarray(g.origin, dtype=float) + (idx + 0.5) * c
             speed = np.linalg.norm(g.interpolate(centres), axis=1)
             inv_tau = np.where(speed > 0.0, speed / c, 0.0)  # 1 / flow-through time [1/s]; 0 in still fluid
-            self._inv_tau = wp.array(inv_tau.astype(np.float32), dtype=float, device=dev)
-            self.cell_momentum = wp.zeros(n, dtype=wp.vec3, device=dev)
-            self.cell_velocity_change = wp.zeros(n, dtype=wp.vec3, device=dev)
-            self._cell_beta = wp.zeros(n, dtype=float, device=dev)
-            self._cell_source = wp.zeros(n, dtype=wp.vec3, device=dev)
-            self._beta = wp.zeros(m.num_bodies, dtype=float, device=dev)
-        else:  # placeholders for the kernel's two-way arguments
-            self._beta = wp.zeros(1, dtype=float, device=dev)
-            self._one_way_velocity_change = wp.zeros(1, dtype=wp.vec3, device=dev)
+            self._exchange.inv_tau = wp.array(inv_tau.astype(np.float32), dtype=float, device=dev)
+            self.cell_momentum = wp.zeros(n_cells, dtype=wp.vec3, device=dev)
+            self.cell_velocity_change = wp.zeros(n_cells, dtype=wp.vec3, device=dev)
+            self._exchange.drag_coefficient_sum = wp.zeros(n_cells, dtype=float, device=dev)
+            self._exchange.drag_source = wp.zeros(n_cells, dtype=wp.vec3, device=dev)
+            self._exchange.body_drag_coefficient = wp.zeros(m.num_bodies, dtype=float, device=dev)
+            self._exchange.momentum = self.cell_momentum
+            self._exchange.velocity_change = self.cell_velocity_change
+        else:  # placeholders: fluid_forces takes the struct but reads it only in two-way mode
+            self._exchange.inv_tau = wp.zeros(1, dtype=float, device=dev)
+            self._exchange.momentum = wp.zeros(1, dtype=wp.vec3, device=dev)
+            self._exchange.velocity_change = wp.zeros(1, dtype=wp.vec3, device=dev)
+            self._exchange.drag_coefficient_sum = wp.zeros(1, dtype=float, device=dev)
+            self._exchange.drag_source = wp.zeros(1, dtype=wp.vec3, device=dev)
+            self._exchange.body_drag_coefficient = wp.zeros(1, dtype=float, device=dev)
+
+        def view(position: wp.array, velocity: wp.array, active: wp.array) -> BodyView:
+            v = BodyView()
+            v.position, v.velocity, v.active = position, velocity, active
+            v.world, v.radius, v.volume = m.body_world, ctx.body_radius, ctx.body_volume
+            return v
+
+        self._body_views = StructCache(view)
+
+    def body_view(self, state) -> BodyView:
+        """The :class:`BodyView` of one engine State (built once per State and reused)."""
+        return self._body_views(state.body_q, state.body_v, state.body_active)
 
     def launch(self, ctx: BodyForceContext, state_in, state_out, dt: float) -> None:
-        m = ctx.model
+        """Voidage, then (two-way) the cells' momentum exchange, then the force on each body."""
+        n = ctx.model.num_bodies
         dev = ctx.device
-        cnx, cny, cnz = self._cdims
-        self._solid.zero_()
-        wp.launch(scatter_solid_volume, dim=m.num_bodies, inputs=[
-            state_in.body_q, state_in.body_active, m.body_world, ctx.body_volume, self._c_origin, self._inv_c,
-            cnx, cny, cnz, self._solid], device=dev)
-        v = self.values
-        rho_f, mu_f, law = float(self.grid.density), float(self.grid.viscosity), DRAG_LAWS.index(self.drag)
+        bodies = self.body_view(state_in)
+        self._cells.solid.zero_()
+        wp.launch(scatter_solid_volume, dim=n, inputs=[bodies, self._cells], device=dev)
         if self.two_way:
-            self._cell_beta.zero_()
-            self._cell_source.zero_()
-            wp.launch(gather_drag_exchange, dim=m.num_bodies, inputs=[
-                state_in.body_q, state_in.body_v, state_in.body_active, m.body_world, ctx.body_radius,
-                self._velocity, self._origin, self._inv_h, self._solid, self._c_origin, self._inv_c, cnx, cny, cnz,
-                self._cell_volume, rho_f, mu_f, law, v["min_voidage"], self.cell_momentum, self._beta,
-                self._cell_beta, self._cell_source], device=dev)
-            wp.launch(relax_cell_momentum, dim=self.cell_momentum.shape[0], inputs=[
-                self._cell_beta, self._cell_source, self._solid, self._inv_tau, cnx * cny * cnz, self._cell_volume,
-                v["min_voidage"], rho_f, self.relaxation, float(dt), self.cell_momentum,
-                self.cell_velocity_change], device=dev)
-        velocity_change = self.cell_velocity_change if self.two_way else self._one_way_velocity_change
-        wp.launch(fluid_forces, dim=m.num_bodies, inputs=[
-            state_in.body_q, state_in.body_v, state_in.body_active, m.body_world, ctx.body_volume, ctx.body_radius,
-            self._velocity, self._acceleration, self._origin, self._inv_h,
-            self._solid, self._c_origin, self._inv_c, cnx, cny, cnz, self._cell_volume,
-            rho_f, mu_f, law, v["min_voidage"],
-            v["pressure_gradient"], v["buoyancy"], v["added_mass"], ctx.gravity, float(dt),
-            self._v_prev, self._seen, int(self.two_way), self._beta, velocity_change, ctx.force, self.voidage],
-            device=dev)
+            self._exchange.drag_coefficient_sum.zero_()
+            self._exchange.drag_source.zero_()
+            wp.launch(gather_drag_exchange, dim=n, inputs=[bodies, self._flow, self._cells, self._fluid,
+                                                           self._exchange], device=dev)
+            wp.launch(relax_cell_momentum, dim=self.cell_momentum.shape[0],
+                      inputs=[self._cells, self._fluid, self._exchange, float(dt)], device=dev)
+        wp.launch(fluid_forces, dim=n, inputs=[bodies, self._flow, self._cells, self._fluid, self._exchange,
+                                               self._memory, float(dt)], outputs=[ctx.force, self.voidage],
+                  device=dev)
