@@ -27,6 +27,7 @@ The configuration (YAML/JSON) is documented in ``calibration/configs/quick_calib
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import os
@@ -49,12 +50,13 @@ from .campaign_records import (RECORD_FORMAT, append_records, code_version, desc
                                plain, plugin_hashes, read_records, write_atomic)
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
-from .experiments.common import _jsonable, cpu_processes
+from .experiments.common import BatchCheckpoints, _jsonable, clear_checkpoints, cpu_processes
 from .measurement.records import load_measurements
 from .model_description import ModelDescription
 
 TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "material", "plugins", "parameters", "fixed", "design", "batch_worlds",
-            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills", "vtk"}
+            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills", "vtk",
+            "checkpoints"}
 FILL_MODES = ("independent", "shared")
 # first loose-fill index of each kind of DEM run when fills are independent: design sample i uses
 # fills i*replicates ..., so the target, the confirmation rounds and the validation never reuse a
@@ -97,6 +99,19 @@ class VtkOutput(BaseModel):
         return sorted(v)
 
 
+class CheckpointSettings(BaseModel):
+    """Config section ``checkpoints``: a campaign's batches save their simulation into
+    ``<output>/checkpoints/`` while they run, so a killed campaign resumes mid-batch
+    (:class:`calibration.experiments.common.BatchCheckpoints`; docs/campaign_records.md).
+
+    enabled: checkpoint the batches (default true). every_s: wall-clock seconds between saves [s]
+    (>= 0; a save also ends every batch's protocol)."""
+
+    model_config = ConfigDict(extra="forbid")
+    enabled: bool = True
+    every_s: float = Field(120.0, ge=0, allow_inf_nan=False)
+
+
 @dataclass
 class Response:
     """A measured response: an experiment, its settings, and the target it must match [deg]."""
@@ -134,13 +149,17 @@ class CampaignConfig:
     surrogate: dict[str, Any] = field(default_factory=dict)
     sobol_n: int = 2**12
     vtk: VtkOutput | None = None  # ParaView series of chosen runs (config section ``vtk``)
+    checkpoints: CheckpointSettings = field(default_factory=CheckpointSettings)
+    # where batches checkpoint (set by Campaign to <output>/checkpoints when enabled; None: nowhere)
+    checkpoint_folder: Path | None = None
     base_dir: Path = Path(".")
 
 
-def _check_sections(raw: Mapping[str, Any], source: str) -> VtkOutput | None:
-    """Sub-keys and values of the optimisation, confirmation, sensitivity, surrogate, design and
-    vtk sections (pydantic): an unknown key such as ``confirmation: {run: 5}`` is an error, not a
-    silent default. Every problem is listed with its path. Returns the parsed ``vtk`` section."""
+def _check_sections(raw: Mapping[str, Any], source: str) -> tuple[VtkOutput | None, CheckpointSettings]:
+    """Sub-keys and values of the optimisation, confirmation, sensitivity, surrogate, design, vtk
+    and checkpoints sections (pydantic): an unknown key such as ``confirmation: {run: 5}`` is an
+    error, not a silent default. Every problem is listed with its path. Returns the parsed ``vtk``
+    and ``checkpoints`` sections."""
     from pydantic import ValidationError
 
     class _S(BaseModel):
@@ -177,8 +196,10 @@ def _check_sections(raw: Mapping[str, Any], source: str) -> VtkOutput | None:
         surrogate: Surrogate = Field(default_factory=Surrogate)
         design: Design = Field(default_factory=Design)
         vtk: VtkOutput | None = None
+        checkpoints: CheckpointSettings = Field(default_factory=CheckpointSettings)
 
-    present = {k: (raw.get(k) or {}) for k in ("optimisation", "confirmation", "sensitivity", "surrogate", "design")}
+    present = {k: (raw.get(k) or {}) for k in ("optimisation", "confirmation", "sensitivity", "surrogate", "design",
+                                               "checkpoints")}
     if raw.get("vtk") is not None:
         present["vtk"] = raw["vtk"]
     n_design = (raw.get("design") or {}).get("samples", 24) if isinstance(raw.get("design") or {}, Mapping) else None
@@ -195,7 +216,7 @@ def _check_sections(raw: Mapping[str, Any], source: str) -> VtkOutput | None:
     tol = (raw.get("optimisation") or {}).get("tolerance_deg")
     if tol is not None and any(float(t) <= 0 for t in np.atleast_1d(tol)):
         raise ConfigError(f"{source}: optimisation.tolerance_deg must be > 0 deg, got {tol!r}")
-    return sections.vtk
+    return sections.vtk, sections.checkpoints
 
 
 def _response(d: Any, where: str) -> Response:
@@ -240,7 +261,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
     for k in ("parameters", "responses"):
         if k not in raw:
             raise ConfigError(f"{source}: missing '{k}'")
-    vtk = _check_sections(raw, source)
+    vtk, checkpoints = _check_sections(raw, source)
     model = ModelDescription.from_config(raw, base_dir=base_dir, where=source)
     params = raw["parameters"]
     if not isinstance(params, Mapping) or not params:
@@ -274,7 +295,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
         refine_rounds=int((raw.get("confirmation") or {}).get("refine_rounds", 0)),
         surrogate=dict(raw.get("surrogate") or {}), sobol_n=int((raw.get("sensitivity") or {}).get("n", 2**12)),
-        vtk=vtk, base_dir=base_dir)
+        vtk=vtk, checkpoints=checkpoints, base_dir=base_dir)
     if not cfg.responses:
         raise ConfigError(f"{source}: 'responses' is empty")
     for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
@@ -318,7 +339,12 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
     noise floor any calibration against this experiment can reach.
 
     ``vtk_folder``: write a ParaView series of world ``cfg.vtk.replicate`` (every ``cfg.vtk.every``
-    simulated seconds) into this folder; the experiment then runs in one process."""
+    simulated seconds) into this folder; the experiment then runs in one process.
+
+    ``cfg.checkpoint_folder`` (set by :class:`Campaign`): the batch checkpoints there every
+    ``cfg.checkpoints.every_s`` wall seconds and continues a checkpoint of this very batch; the
+    checkpoint stays until the caller has recorded the results (:func:`clear_checkpoints`). A run
+    that writes VTK is not checkpointed."""
     r = resp.replicates
     settings = dict(resp.settings)
     if vtk_folder is not None:
@@ -337,8 +363,12 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
                           **settings)
     sets = [{**cfg.fixed, **p} for p in parameter_sets for _ in range(r)]
     t0 = time.perf_counter()
+    checkpoints = None
+    if cfg.checkpoint_folder is not None and vtk_folder is None:
+        checkpoints = BatchCheckpoints(cfg.checkpoint_folder, cfg.checkpoints.every_s, keep_until_recorded=True)
     try:
-        results = exp.run(sets, device=cfg.device, progress=progress, processes=cfg.processes)
+        results = exp.run(sets, device=cfg.device, progress=progress, processes=cfg.processes,
+                          checkpoints=checkpoints)
     except (wd.StabilityError, wd.ContactOverflowError) as exc:  # the whole batch failed
         return [dict(status="failed", error=f"{type(exc).__name__}: {exc}", angle_deg=None) for _ in parameter_sets]
     wall = time.perf_counter() - t0
@@ -517,9 +547,11 @@ class Campaign:
 
     def __init__(self, cfg: CampaignConfig, output: str | os.PathLike | None = None, verbose: bool = True,
                  retry_failed: bool = False) -> None:
-        self.cfg = cfg
         self.out = Path(output or cfg.output)
         self.out.mkdir(parents=True, exist_ok=True)
+        # batches checkpoint into <output>/checkpoints (a copy of the config carries the folder)
+        self.checkpoint_folder = self.out / "checkpoints" if cfg.checkpoints.enabled else None
+        self.cfg = dataclasses.replace(cfg, checkpoint_folder=self.checkpoint_folder)
         self.verbose = verbose
         self.retry_failed = retry_failed
         self.samples_path = self.out / "samples.jsonl"
@@ -657,8 +689,16 @@ class Campaign:
                          sitting=self.sitting_id, determined_by=by, fingerprint=fp))
         append_records(self.runs_path, [rec])
         self._run_records.append(rec)
+        self._clear_checkpoints()
         self.note_sitting()
         return rec["results"]
+
+    def _clear_checkpoints(self) -> None:
+        """Remove the batch checkpoints once a batch's results are recorded (batches run one
+        after another, so every checkpoint in the folder belongs to the batch just recorded or
+        to an abandoned one)."""
+        if self.checkpoint_folder is not None:
+            clear_checkpoints(self.checkpoint_folder)
 
     # ------------------------------------------------------------------ wall time over sittings
     def _sittings(self) -> list[dict[str, Any]]:
@@ -732,6 +772,7 @@ class Campaign:
                 results = run_recorded(resp, sets, self.cfg, first_fill=first_fill, record=record)
                 new = [self.sample_record(resp, i, p, f, res) for i, p, f, res in zip(batch, sets, fills, results)]
                 append_records(self.samples_path, new)  # whole lines, flushed and fsynced
+                self._clear_checkpoints()
                 for rec in new:
                     done[(rec["index"], resp.name)] = rec
                 self._sample_records += new
