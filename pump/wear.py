@@ -35,6 +35,7 @@ from warpdem import kernels as wk
 from warpdem.body_forces import BodyForceContext, BodyForceModel, ParameterSpec, register_body_force
 from warpdem.errors import ConfigError
 
+from .coupling import StructCache
 from .geometry import BLADE_ZONES, COMPONENTS
 
 
@@ -51,73 +52,100 @@ def finnie_angle_function(alpha: float):
     return wp.cos(alpha) * wp.cos(alpha) / 3.0
 
 
+@wp.struct
+class ImpactBodies:
+    """Per sphere its body, and the bodies' state and mass, as the impact kernel reads them."""
+
+    sphere_body: wp.array(dtype=int)  # (Model.sphere_body)
+    sphere_world: wp.array(dtype=int)  # (Model.sphere_world)
+    position: wp.array(dtype=wp.vec3)  # body centre of mass [m] (State.body_q)
+    velocity: wp.array(dtype=wp.vec3)  # [m/s] (State.body_v)
+    angular_velocity: wp.array(dtype=wp.vec3)  # [rad/s] (State.body_w)
+    active: wp.array(dtype=int)  # (State.body_active)
+    mass: wp.array(dtype=float)  # [kg] (Model.body_mass)
+
+
+@wp.struct
+class ContactSlots:
+    """One State's contact slots: slot s of sphere i at i * per_sphere + s."""
+
+    per_sphere: int  # slots per sphere (Model.max_contacts)
+    count: wp.array(dtype=int)  # slots in use per sphere
+    partner: wp.array(dtype=int)  # partner sphere, or -(wall + 1) for a wall
+    wall_normal: wp.array(dtype=wp.vec3)  # unit normal of a wall contact
+
+
+@wp.struct
+class SlotContactPoints:
+    """Where this step's contact slots touch (DEMSolver.slot_point, slot_tri)."""
+
+    point: wp.array(dtype=wp.vec3)  # contact point [m]
+    triangle: wp.array(dtype=int)  # triangle within its wall
+
+
+@wp.struct
+class WallMotions:
+    """Per wall its triangle numbering and prescribed motion (Model.wall_*)."""
+
+    triangle_offset: wp.array(dtype=int)  # first triangle of each wall in a world's numbering
+    total_triangles: int  # triangles per world
+    linear_velocity: wp.array(dtype=wp.vec3)  # [m/s]
+    angular_velocity: wp.array(dtype=wp.vec3)  # [rad/s] about origin
+    origin: wp.array(dtype=wp.vec3)  # [m]
+    t_start: wp.array(dtype=float)  # motion starts [s]
+    t_stop: wp.array(dtype=float)  # motion stops [s]
+
+
+@wp.struct
+class ImpactTallies:
+    """Per triangle (index world * total_triangles + triangle) and overall, what the impacts add up to."""
+
+    erosion: wp.array(dtype=float)  # Finnie volume [m^3]
+    impacts: wp.array(dtype=float)  # count [-]
+    impact_energy: wp.array(dtype=float)  # 1/2 m v_n^2 [J]
+    max_normal_speed: wp.array(dtype=float)  # (1,): largest v_n of any impact [m/s]
+
+
 @wp.kernel
-def record_wall_impacts(
-    sphere_body: wp.array(dtype=int),
-    sphere_world: wp.array(dtype=int),
-    body_q: wp.array(dtype=wp.vec3),
-    body_v: wp.array(dtype=wp.vec3),
-    body_w: wp.array(dtype=wp.vec3),
-    body_mass: wp.array(dtype=float),
-    body_active: wp.array(dtype=int),
-    max_contacts: int,
-    count_in: wp.array(dtype=int),
-    partner_in: wp.array(dtype=int),
-    wnormal_in: wp.array(dtype=wp.vec3),
-    count_out: wp.array(dtype=int),
-    partner_out: wp.array(dtype=int),
-    wnormal_out: wp.array(dtype=wp.vec3),
-    slot_point: wp.array(dtype=wp.vec3),
-    slot_tri: wp.array(dtype=int),
-    wall_tri_offset: wp.array(dtype=int),
-    wall_lin_vel: wp.array(dtype=wp.vec3),
-    wall_ang_vel: wp.array(dtype=wp.vec3),
-    wall_origin: wp.array(dtype=wp.vec3),
-    wall_t_start: wp.array(dtype=float),
-    wall_t_stop: wp.array(dtype=float),
-    total_tris: int,
-    time: wp.array(dtype=wp.float64),
-    finnie_k: float,
-    erosion: wp.array(dtype=float),
-    impacts: wp.array(dtype=float),
-    impact_energy: wp.array(dtype=float),
-    max_normal_speed: wp.array(dtype=float),
-):
-    """New wall contacts of this step -> Finnie erosion, impact count and normal impact
-    energy 1/2 m v_n^2 per triangle (index world * T + triangle)."""
+def record_wall_impacts(bodies: ImpactBodies, before: ContactSlots, after: ContactSlots, points: SlotContactPoints,
+                        walls: WallMotions, time: wp.array(dtype=wp.float64), finnie_k: float,
+                        tallies: ImpactTallies):
+    """New wall contacts of this step (in ``after``, not matched in ``before``) -> Finnie
+    erosion V = k m v^2 f(alpha) [m^3], impact count and normal impact energy 1/2 m v_n^2 [J]
+    per triangle; ``finnie_k`` [m^3/J], ``time`` [s] of the step's start."""
     i = wp.tid()
-    b = sphere_body[i]
-    if body_active[b] == 0:
+    b = bodies.sphere_body[i]
+    if bodies.active[b] == 0:
         return
-    base = i * max_contacts
+    base = i * after.per_sphere
     t_now = time[0]
-    for s in range(count_out[i]):
-        tag = partner_out[base + s]
+    for s in range(after.count[i]):
+        tag = after.partner[base + s]
         if tag >= 0:
             continue
-        nrm = wnormal_out[base + s]
+        nrm = after.wall_normal[base + s]
         new = int(1)
-        for o in range(count_in[i]):
-            if partner_in[base + o] == tag and wp.dot(wnormal_in[base + o], nrm) > wk.WALL_MATCH_COS:
+        for o in range(before.count[i]):
+            if before.partner[base + o] == tag and wp.dot(before.wall_normal[base + o], nrm) > wk.WALL_MATCH_COS:
                 new = 0
         if new == 0:
             continue
         kw = -tag - 1
-        cp = slot_point[base + s]
-        v_wall = wk.wall_point_velocity(t_now, wall_t_start[kw], wall_t_stop[kw], wall_origin[kw], wall_lin_vel[kw],
-                                        wall_ang_vel[kw], cp)
-        v_rel = body_v[b] + wp.cross(body_w[b], cp - body_q[b]) - v_wall
+        cp = points.point[base + s]
+        v_wall = wk.wall_point_velocity(t_now, walls.t_start[kw], walls.t_stop[kw], walls.origin[kw],
+                                        walls.linear_velocity[kw], walls.angular_velocity[kw], cp)
+        v_rel = bodies.velocity[b] + wp.cross(bodies.angular_velocity[b], cp - bodies.position[b]) - v_wall
         v_n = -wp.dot(v_rel, nrm)
         if v_n <= 0.0:
             continue
         v_t = wp.length(v_rel + v_n * nrm)
         alpha = wp.atan2(v_n, v_t)
-        m = body_mass[b]
-        idx = sphere_world[i] * total_tris + wall_tri_offset[kw] + slot_tri[base + s]
-        wp.atomic_add(erosion, idx, finnie_k * m * wp.dot(v_rel, v_rel) * finnie_angle_function(alpha))
-        wp.atomic_add(impacts, idx, 1.0)
-        wp.atomic_add(impact_energy, idx, 0.5 * m * v_n * v_n)
-        wp.atomic_max(max_normal_speed, 0, v_n)
+        m = bodies.mass[b]
+        idx = bodies.sphere_world[i] * walls.total_triangles + walls.triangle_offset[kw] + points.triangle[base + s]
+        wp.atomic_add(tallies.erosion, idx, finnie_k * m * wp.dot(v_rel, v_rel) * finnie_angle_function(alpha))
+        wp.atomic_add(tallies.impacts, idx, 1.0)
+        wp.atomic_add(tallies.impact_energy, idx, 0.5 * m * v_n * v_n)
+        wp.atomic_max(tallies.max_normal_speed, 0, v_n)
 
 
 @register_body_force
@@ -132,29 +160,63 @@ class ImpactRecorder(BodyForceModel):
     reference = "Finnie (1960) Wear 3:87"
 
     def bind(self, ctx: BodyForceContext) -> None:
+        """Allocate the tallies; the kernel's other structs are built on first use per set of
+        engine arrays (:class:`pump.coupling.StructCache`)."""
         m = ctx.model
         n = max(m.num_worlds * m.total_triangles, 1)
         self.erosion = wp.zeros(n, dtype=float, device=ctx.device)
         self.impacts = wp.zeros(n, dtype=float, device=ctx.device)
         self.impact_energy = wp.zeros(n, dtype=float, device=ctx.device)
         self.max_normal_speed = wp.zeros(1, dtype=float, device=ctx.device)  # largest v_n of any impact [m/s]
+        self._tallies = ImpactTallies()
+        self._tallies.erosion, self._tallies.impacts = self.erosion, self.impacts
+        self._tallies.impact_energy, self._tallies.max_normal_speed = self.impact_energy, self.max_normal_speed
+
+        def bodies(position, velocity, angular_velocity, active) -> ImpactBodies:
+            v = ImpactBodies()
+            v.sphere_body, v.sphere_world, v.mass = m.sphere_body, m.sphere_world, m.body_mass
+            v.position, v.velocity, v.angular_velocity, v.active = position, velocity, angular_velocity, active
+            return v
+
+        def slots(count, partner, wall_normal) -> ContactSlots:
+            v = ContactSlots()
+            v.per_sphere, v.count, v.partner, v.wall_normal = m.max_contacts, count, partner, wall_normal
+            return v
+
+        def points(point, triangle) -> SlotContactPoints:
+            v = SlotContactPoints()
+            v.point, v.triangle = point, triangle
+            return v
+
+        def walls(triangle_offset, linear_velocity, angular_velocity, origin, t_start, t_stop) -> WallMotions:
+            v = WallMotions()
+            v.triangle_offset, v.total_triangles = triangle_offset, m.total_triangles
+            v.linear_velocity, v.angular_velocity, v.origin = linear_velocity, angular_velocity, origin
+            v.t_start, v.t_stop = t_start, t_stop
+            return v
+
+        self._bodies, self._slots = StructCache(bodies), StructCache(slots)
+        self._points, self._walls = StructCache(points), StructCache(walls)
 
     def zero(self) -> None:
         for a in (self.erosion, self.impacts, self.impact_energy, self.max_normal_speed):
             a.zero_()
 
     def launch(self, ctx: BodyForceContext, state_in, state_out, dt: float) -> None:
+        """Tally the wall contacts that are new in ``state_out`` (kernels only)."""
         m = ctx.model
         s = ctx.solver
         if not m.walls:
             return
+        bodies = self._bodies(state_in.body_q, state_in.body_v, state_in.body_w, state_in.body_active)
+        before = self._slots(state_in.contact_count, state_in.contact_partner, state_in.contact_wnormal)
+        after = self._slots(state_out.contact_count, state_out.contact_partner, state_out.contact_wnormal)
+        points = self._points(s.slot_point, s.slot_tri)
+        walls = self._walls(m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel, m.wall_origin, m.wall_t_start,
+                            m.wall_t_stop)
         wp.launch(record_wall_impacts, dim=m.num_spheres, inputs=[
-            m.sphere_body, m.sphere_world, state_in.body_q, state_in.body_v, state_in.body_w, m.body_mass,
-            state_in.body_active, m.max_contacts, state_in.contact_count, state_in.contact_partner,
-            state_in.contact_wnormal, state_out.contact_count, state_out.contact_partner, state_out.contact_wnormal,
-            s.slot_point, s.slot_tri, m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel, m.wall_origin,
-            m.wall_t_start, m.wall_t_stop, m.total_triangles, state_in.time, self.values["finnie_k"],
-            self.erosion, self.impacts, self.impact_energy, self.max_normal_speed], device=m.device)
+            bodies, before, after, points, walls, state_in.time, self.values["finnie_k"], self._tallies],
+            device=m.device)
 
 
 # ----------------------------------------------------------------------------- read-out
