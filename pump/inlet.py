@@ -27,70 +27,85 @@ import warp as wp
 from warpdem.builder import random_quaternions
 from warpdem.errors import ConfigError
 
+from .coupling import StructCache
 from .geometry import REGIONS, PumpGeometry
 
 PARK_DEPTH = 2.0  # parked bodies sit this far [m] below the pump
 
 
+@wp.struct
+class InjectionSchedule:
+    """The scheduled particles, in time order per world."""
+
+    time: wp.array(dtype=float)  # scheduled entry time [s]
+    body: wp.array(dtype=int)  # reserve body injected
+    position: wp.array(dtype=wp.vec3)  # entry position at that time [m]
+    velocity: wp.array(dtype=wp.vec3)  # entry velocity [m/s]
+    injected: wp.array(dtype=int)  # 1 once activated
+
+
+@wp.struct
+class BodyMotion:
+    """One State's body arrays the inlet and outlet write, and each body's world."""
+
+    active: wp.array(dtype=int)  # (State.body_active)
+    position: wp.array(dtype=wp.vec3)  # centre of mass [m] (State.body_q)
+    velocity: wp.array(dtype=wp.vec3)  # [m/s] (State.body_v)
+    angular_velocity: wp.array(dtype=wp.vec3)  # [rad/s] (State.body_w)
+    world: wp.array(dtype=int)  # (Model.body_world)
+
+
+@wp.struct
+class ExitRegions:
+    """Where bodies leave: the discharge's open end and the pump's bounding box."""
+
+    outlet_y: float  # plane of the discharge's open end [m]
+    outlet_x0: float  # x range of the discharge opening [m]
+    outlet_x1: float
+    lower: wp.vec3  # bounding box of the pump, with a margin [m]
+    upper: wp.vec3
+
+
 @wp.kernel
-def activate_scheduled(
-    time: wp.array(dtype=wp.float64),
-    sched_time: wp.array(dtype=float),
-    sched_body: wp.array(dtype=int),
-    sched_pos: wp.array(dtype=wp.vec3),
-    sched_vel: wp.array(dtype=wp.vec3),
-    injected: wp.array(dtype=int),
-    body_active: wp.array(dtype=int),
-    body_q: wp.array(dtype=wp.vec3),
-    body_v: wp.array(dtype=wp.vec3),
-    body_w: wp.array(dtype=wp.vec3),
-    rebuild: wp.array(dtype=int),
-    count: wp.array(dtype=int),
-):
-    """Activate every scheduled body whose time has come, at the pose it would have reached."""
+def activate_scheduled(schedule: InjectionSchedule, bodies: BodyMotion, time: wp.array(dtype=wp.float64),
+                       rebuild: wp.array(dtype=int), count: wp.array(dtype=int)):
+    """Activate every scheduled body whose time has come, at the pose it would have reached;
+    set ``rebuild`` (neighbour list) and add to ``count`` (injected so far)."""
     i = wp.tid()
-    if injected[i] != 0:
+    if schedule.injected[i] != 0:
         return
     t = float(time[0])
-    if t < sched_time[i]:
+    if t < schedule.time[i]:
         return
-    b = sched_body[i]
-    injected[i] = 1
-    body_active[b] = 1
-    body_q[b] = sched_pos[i] + sched_vel[i] * (t - sched_time[i])
-    body_v[b] = sched_vel[i]
-    body_w[b] = wp.vec3(0.0)
+    b = schedule.body[i]
+    schedule.injected[i] = 1
+    bodies.active[b] = 1
+    bodies.position[b] = schedule.position[i] + schedule.velocity[i] * (t - schedule.time[i])
+    bodies.velocity[b] = schedule.velocity[i]
+    bodies.angular_velocity[b] = wp.vec3(0.0)
     rebuild[0] = 1
     wp.atomic_add(count, 0, 1)
 
 
 @wp.kernel
-def remove_leaving(
-    body_q: wp.array(dtype=wp.vec3),
-    body_world: wp.array(dtype=int),
-    body_active: wp.array(dtype=int),
-    outlet_y: float,
-    outlet_x0: float,
-    outlet_x1: float,
-    lower: wp.vec3,
-    upper: wp.vec3,
-    removed_outlet: wp.array(dtype=int),
-    removed_lost: wp.array(dtype=int),
-):
+def remove_leaving(bodies: BodyMotion, exits: ExitRegions, removed_outlet: wp.array(dtype=int),
+                   removed_lost: wp.array(dtype=int)):
     """Deactivate bodies past the discharge's open end (counted per world as 'outlet') and
     bodies outside the pump's bounding box elsewhere (counted as 'lost': back out of the
     suction pipe, or through a gap in user meshes)."""
     b = wp.tid()
-    if body_active[b] == 0:
+    if bodies.active[b] == 0:
         return
-    x = body_q[b]
-    if x[1] > outlet_y and x[0] > outlet_x0 and x[0] < outlet_x1:
-        body_active[b] = 0
-        wp.atomic_add(removed_outlet, body_world[b], 1)
+    x = bodies.position[b]
+    if x[1] > exits.outlet_y and x[0] > exits.outlet_x0 and x[0] < exits.outlet_x1:
+        bodies.active[b] = 0
+        wp.atomic_add(removed_outlet, bodies.world[b], 1)
         return
-    if x[0] < lower[0] or x[1] < lower[1] or x[2] < lower[2] or x[0] > upper[0] or x[1] > upper[1] or x[2] > upper[2]:
-        body_active[b] = 0
-        wp.atomic_add(removed_lost, body_world[b], 1)
+    lo = exits.lower
+    hi = exits.upper
+    if x[0] < lo[0] or x[1] < lo[1] or x[2] < lo[2] or x[0] > hi[0] or x[1] > hi[1] or x[2] > hi[2]:
+        bodies.active[b] = 0
+        wp.atomic_add(removed_lost, bodies.world[b], 1)
 
 
 def injection_rate(volume_fraction: float, flow_rate: float, mean_volume: float) -> float:
@@ -234,19 +249,34 @@ class ParticleInlet:
             act[self.body_ids] = 0
             st.body_active.assign(act)
         p = self.plan
-        self._time = wp.array(p.time.astype(np.float32), dtype=float, device=d)
-        self._body = wp.array(self.body_ids.astype(np.int32), dtype=int, device=d)
-        self._pos = wp.array(p.position.astype(np.float32), dtype=wp.vec3, device=d)
-        self._vel = wp.array(p.velocity.astype(np.float32), dtype=wp.vec3, device=d)
-        self._injected = wp.zeros(max(p.count, 1), dtype=int, device=d)
+        self._schedule = InjectionSchedule()
+        self._schedule.time = wp.array(p.time.astype(np.float32), dtype=float, device=d)
+        self._schedule.body = wp.array(self.body_ids.astype(np.int32), dtype=int, device=d)
+        self._schedule.position = wp.array(p.position.astype(np.float32), dtype=wp.vec3, device=d)
+        self._schedule.velocity = wp.array(p.velocity.astype(np.float32), dtype=wp.vec3, device=d)
+        self._schedule.injected = wp.zeros(max(p.count, 1), dtype=int, device=d)
         self._count = wp.zeros(1, dtype=int, device=d)
         nw = m.num_worlds
         self._out = wp.zeros(nw, dtype=int, device=d)
         self._lost = wp.zeros(nw, dtype=int, device=d)
-        lo, hi = self.geometry.bounds()
+        g = self.geometry
+        lo, hi = g.bounds()
         margin = 0.05
-        self._lower = wp.vec3(*(lo - margin))
-        self._upper = wp.vec3(*(hi + margin))
+        self._exits = ExitRegions()
+        self._exits.outlet_y = float(g.outlet_y)
+        self._exits.outlet_x0 = float(g.design.r3 - 0.01)
+        self._exits.outlet_x1 = float(g.design.r_throat + 0.01)
+        self._exits.lower = wp.vec3(*(lo - margin))
+        self._exits.upper = wp.vec3(*(hi + margin))
+
+        def motion(active: wp.array, position: wp.array, velocity: wp.array, angular_velocity: wp.array,
+                   world: wp.array) -> BodyMotion:
+            v = BodyMotion()
+            v.active, v.position, v.velocity, v.angular_velocity = active, position, velocity, angular_velocity
+            v.world = world
+            return v
+
+        self._motions = StructCache(motion)
         sim.solver.request_neighbour_rebuild()
 
     def update(self, sim=None) -> None:
@@ -256,15 +286,12 @@ class ParticleInlet:
             raise ConfigError("ParticleInlet.update: call attach(sim) first")
         m = sim.model
         st = sim.state
+        bodies = self._motions(st.body_active, st.body_q, st.body_v, st.body_w, m.body_world)
         if self.plan.count:
-            wp.launch(activate_scheduled, dim=self.plan.count, inputs=[
-                st.time, self._time, self._body, self._pos, self._vel, self._injected, st.body_active, st.body_q,
-                st.body_v, st.body_w, sim.solver.rebuild, self._count], device=m.device)
-        g = self.geometry
-        d = g.design
-        wp.launch(remove_leaving, dim=m.num_bodies, inputs=[
-            st.body_q, m.body_world, st.body_active, float(g.outlet_y), float(d.r3 - 0.01), float(d.r_throat + 0.01),
-            self._lower, self._upper, self._out, self._lost], device=m.device)
+            wp.launch(activate_scheduled, dim=self.plan.count,
+                      inputs=[self._schedule, bodies, st.time, sim.solver.rebuild, self._count], device=m.device)
+        wp.launch(remove_leaving, dim=m.num_bodies, inputs=[bodies, self._exits, self._out, self._lost],
+                  device=m.device)
 
     # ---------------------------------------------------------------- read-back
     @property
