@@ -229,8 +229,9 @@ def scatter_solid_volume(bodies: BodyView, cells: VoidageGrid):
 @wp.kernel
 def gather_drag_exchange(bodies: BodyView, flow: FluidField, cells: VoidageGrid, fluid: FluidCoupling,
                          exchange: CellExchange):
-    """Two-way, pass 1: per body the linearised drag coefficient beta_i [kg/s] at the previous
-    step's cell velocity; per cell B_c = sum beta_i [kg/s] and S_c = sum beta_i (u0_i - v_i) [N]."""
+    """Two-way, pass 1: per body the linearised drag coefficient beta_i = |F_d(u_rel)| / |u_rel|
+    [kg/s] at the previous step's cell velocity (semi-implicit drag, Xiao & Sun 2011); per cell
+    B_c = sum beta_i [kg/s] and S_c = sum beta_i (u0_i - v_i) [N]."""
     b = wp.tid()
     if bodies.active[b] == 0:
         exchange.body_drag_coefficient[b] = 0.0
@@ -250,8 +251,9 @@ def gather_drag_exchange(bodies: BodyView, flow: FluidField, cells: VoidageGrid,
 
 @wp.kernel
 def relax_cell_momentum(cells: VoidageGrid, fluid: FluidCoupling, exchange: CellExchange, dt: float):
-    """Two-way, pass 2 (per world and cell): P_c <- (P_c - dt S_c) / (1 + r dt / tau_c + dt B_c / m_c)
-    [kg m/s]; du_c = P_c / m_c [m/s]."""
+    """Two-way, pass 2 (per world and cell), dP_c/dt = -sum_i F_i - r P_c / tau_c implicit in P_c
+    (sink: Kafui, Thornton & Adams 2002, model B): P_c <- (P_c - dt S_c) / (1 + r dt / tau_c + dt B_c / m_c)
+    [kg m/s]; du_c = P_c / m_c [m/s]; ``dt`` [s]."""
     c = wp.tid()
     m_c = cell_fluid_mass(cells, c, fluid.density)
     inv_tau = exchange.inv_tau[c % (cells.nx * cells.ny * cells.nz)]
@@ -265,8 +267,10 @@ def relax_cell_momentum(cells: VoidageGrid, fluid: FluidCoupling, exchange: Cell
 def fluid_forces(bodies: BodyView, flow: FluidField, cells: VoidageGrid, fluid: FluidCoupling,
                  exchange: CellExchange, memory: AddedMassMemory, dt: float, force: wp.array(dtype=wp.vec3),
                  voidage: wp.array(dtype=float)):
-    """Add drag, undisturbed-flow force, buoyancy and added mass (module docstring) to ``force``
-    [N]; write each body's local voidage eps [-] to ``voidage``."""
+    """Add F = F_d + p rho_f V Du/Dt - b rho_f V g + C_a rho_f V (p Du/Dt - dv/dt) to ``force`` [N]:
+    drag (Di Felice 1994 or Schiller & Naumann 1933), undisturbed flow (Maxey & Riley 1983),
+    buoyancy, added mass (Auton, Hunt & Prud'homme 1988; dv/dt lagged one step of ``dt`` [s]);
+    p, b the pressure and buoyancy factors. Writes each body's local voidage eps [-] to ``voidage``."""
     b = wp.tid()
     if bodies.active[b] == 0:
         memory.seen[b] = 0

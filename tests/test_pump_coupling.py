@@ -180,7 +180,8 @@ def swirling_flow():
     grid = FlowGrid.uniform((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.2, 0.2, 0.2), 0.01)
     x = np.stack(np.meshgrid(*[np.arange(n) * 0.01 for n in grid.shape], indexing="ij"), -1)
     k = 2 * math.pi / 0.2
-    u = np.stack([1.0 + 0.8 * np.sin(k * x[..., 1]), 0.4 * np.cos(k * x[..., 0]), -0.2 + 0.3 * np.sin(k * x[..., 2])], -1)
+    u = np.stack([1.0 + 0.8 * np.sin(k * x[..., 1]), 0.4 * np.cos(k * x[..., 0]),
+                  -0.2 + 0.3 * np.sin(k * x[..., 2])], -1)
     grid.velocity[...] = u.astype(np.float32)
     grid.acceleration[...] = np.stack([0.8 * k * np.cos(k * x[..., 1]) * u[..., 1],
                                        -0.4 * k * np.sin(k * x[..., 0]) * u[..., 0],
@@ -188,7 +189,7 @@ def swirling_flow():
     return grid
 
 
-def reference_runs(steps=30, saved=(1, 2, 3, 10, 20, 30)):
+def reference_runs(steps=30, saved=(1, 2, 3, 10, 20, 30), device="cpu"):
     """Fluid force [N] after the ``saved`` steps on 2 x 27 spheres (two worlds, no contacts) in :func:`swirling_flow`:
     two-way (Di Felice, added mass, buoyancy, pressure gradient) and one-way (Schiller-Naumann)."""
     rng = np.random.default_rng(7)
@@ -205,7 +206,7 @@ def reference_runs(steps=30, saved=(1, 2, 3, 10, 20, 30)):
         for x, w, v in zip(centres, worlds, v0):
             b.add_sphere(tuple(x), 0.005, wd.GRAVEL.name, world=w, velocity=tuple(v))
         b.add_body_force(forces)
-        sim = wd.Simulation(b.finalize("cpu", check_overlaps=False), dt=1e-4, force=True)
+        sim = wd.Simulation(b.finalize(device, check_overlaps=False), dt=1e-4, force=True)
         history = []
         for step in range(1, steps + 1):
             sim.run(1)
