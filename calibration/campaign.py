@@ -17,6 +17,9 @@ Data flows one way and every stage writes what it produced into the output folde
 ``summary.md``              a short human-readable account
 ``vtk/``                    on request (config section ``vtk``): ParaView ``.pvd`` series of
                             chosen design samples, targets, confirmation and validation runs
+``checkpoints/``            the simulation of the batch under way (config section
+                            ``checkpoints``), so a killed campaign resumes mid-batch; removed
+                            once the batch is recorded (docs/campaign_records.md)
 ==========================  ===================================================================
 
 Every record carries a fingerprint of what determines it (parameters, experiment and settings,
