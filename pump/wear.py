@@ -26,6 +26,7 @@ relative to the wall, split into normal v_n and tangential v_t parts):
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,15 +40,23 @@ from .coupling import StructCache
 from .geometry import BLADE_ZONES, COMPONENTS
 
 
+# Finnie (1960) Wear 3:87: the two branches of f(alpha) meet where tan(alpha) = 1/3.
+FINNIE_SWITCH_ANGLE = math.atan(1.0 / 3.0)  # [rad], 18.43 deg
+
+
 def finnie_f(alpha: np.ndarray) -> np.ndarray:
-    """Finnie's angle function f(alpha) (alpha [rad] from the wall)."""
+    """Finnie's angle function f(alpha) (alpha [rad] from the wall, 0 to pi/2):
+    sin 2a - 3 sin^2 a for a <= atan(1/3), cos^2 a / 3 above (0 at a head-on impact)."""
     a = np.asarray(alpha, dtype=float)
-    return np.where(np.tan(a) <= 1.0 / 3.0, np.sin(2 * a) - 3 * np.sin(a) ** 2, np.cos(a) ** 2 / 3.0)
+    return np.where(a <= FINNIE_SWITCH_ANGLE, np.sin(2 * a) - 3 * np.sin(a) ** 2, np.cos(a) ** 2 / 3.0)
 
 
 @wp.func
 def finnie_angle_function(alpha: float):
-    if wp.tan(alpha) <= 1.0 / 3.0:
+    """Finnie's f(alpha), device side (see :func:`finnie_f`). The branch is chosen on the angle, not
+    on tan(alpha): a head-on impact's float32 angle lands just above pi/2, where tan is a huge
+    negative number and would pick the low-angle branch (f = -3 instead of 0)."""
+    if alpha <= wp.static(FINNIE_SWITCH_ANGLE):
         return wp.sin(2.0 * alpha) - 3.0 * wp.sin(alpha) * wp.sin(alpha)
     return wp.cos(alpha) * wp.cos(alpha) / 3.0
 

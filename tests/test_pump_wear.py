@@ -96,7 +96,7 @@ def test_impact_normal_energy_is_the_work_of_the_normal_force():
     assert sum(rec.per_component("energy_t").values()) == pytest.approx(0.0, abs=1e-12)
 
 
-@pytest.mark.parametrize("angle_deg", [10.0, 40.0])
+@pytest.mark.parametrize("angle_deg", [10.0, 40.0, 90.0])  # 90: head-on, f = 0 (float32 angle just above pi/2)
 def test_finnie_erosion_of_one_oblique_impact(angle_deg):
     v0, k = 2.0, 5e-10
     a = math.radians(angle_deg)
@@ -105,7 +105,9 @@ def test_finnie_erosion_of_one_oblique_impact(angle_deg):
     sim.run(400)
     rec = WearRecorder(sim, [0], impacts=rec_model)
     assert sum(rec.per_component("impacts").values()) == pytest.approx(1.0)
-    assert sum(rec.per_component("erosion").values()) == pytest.approx(k * MASS * v0**2 * finnie_f(a), rel=1e-3)
+    erosion = sum(rec.per_component("erosion").values())
+    assert erosion >= 0.0
+    assert erosion == pytest.approx(k * MASS * v0**2 * finnie_f(a), rel=1e-3, abs=1e-6 * k * MASS * v0**2)
     assert sum(rec.per_component("impact_energy").values()) == pytest.approx(0.5 * MASS * (v0 * math.sin(a)) ** 2,
                                                                               rel=1e-3)
 
