@@ -313,6 +313,39 @@ def _ranges(A: np.ndarray, space: ParameterSpace) -> dict[str, tuple[float, floa
     return {n: (float(A[:, k].min()), float(A[:, k].max())) for k, n in enumerate(space.names)}
 
 
+def _tolerance_text(result: CalibrationResult) -> str:
+    return "; ".join(f"{n} {t:.2f} ± {e:.2f} deg" for n, t, e in zip(result.response_names, result.targets,
+                                                                   result.tolerance))
+
+
+def _plot_acceptable_interval(result: CalibrationResult, A: np.ndarray, err: np.ndarray, ref, reference_label: str,
+                              path: str | None):
+    """One calibrated parameter: the acceptable values on its axis against their largest normalised error."""
+    import matplotlib.pyplot as plt
+
+    space = result.space
+    p = space.parameters[0]
+    fig, ax = plt.subplots(figsize=(7.0, 4.2), constrained_layout=True)
+    if len(A):
+        ax.scatter(A[:, 0], err, s=6, c=err, cmap="viridis", vmin=0, vmax=1, rasterized=True,
+                   label="acceptable parameter values")
+    ax.axvline(result.compromise_x[0], color="r", lw=2, label="compromise (NSGA-II)")
+    if ref is not None:
+        ax.axvline(ref[0], color="orange", ls="--", lw=2, label=reference_label)
+    ax.set_xlim(space.lower[0], space.upper[0])
+    ax.set_ylim(0, 1.05)
+    ax.set_xlabel(f"{p.name} [{p.unit}]" if p.unit else p.name)
+    ax.set_ylabel("largest |predicted - target| / tolerance (-)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    ax.set_title(f"Acceptable set: {len(result.acceptable_X)} values whose predicted angles all lie within "
+                 f"tolerance\ntargets: {_tolerance_text(result)}", fontsize=10)
+    if path is not None:
+        fig.savefig(path, dpi=130)
+        plt.close(fig)
+    return fig
+
+
 def plot_acceptable_set(
     result: CalibrationResult,
     path: str | None = None,
@@ -341,6 +374,8 @@ def plot_acceptable_set(
     order = np.argsort(-err)  # best points drawn last (on top)
     A, err = A[order], err[order]
     ref = None if reference is None else _as_vector(reference, names, "reference")
+    if d == 1:
+        return _plot_acceptable_interval(result, A, err, ref, reference_label, path)
     side = max(5.0, 3.0 * (d - 1))
     fig, axes = plt.subplots(d - 1, d - 1, figsize=(side + 1.6, side + 0.8), squeeze=False, constrained_layout=True)
     units = [p.unit for p in space.parameters]
@@ -370,8 +405,7 @@ def plot_acceptable_set(
                 ax.set_ylabel(label(r))
     handles, labels = axes[0, 0].get_legend_handles_labels()
     frac = len(result.acceptable_X)
-    tol_txt = "; ".join(f"{n} {t:.2f} ± {e:.2f} deg" for n, t, e in zip(result.response_names, result.targets,
-                                                                       result.tolerance))
+    tol_txt = _tolerance_text(result)
     fig.suptitle(f"Acceptable set: {frac} parameter sets whose predicted angles all lie within tolerance\n"
                  f"targets: {tol_txt}", fontsize=10)
     if d > 2:

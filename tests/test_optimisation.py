@@ -113,3 +113,23 @@ def test_plot_writes_png(result, tmp_path):
     p = tmp_path / "acc.png"
     plot_acceptable_set(result, str(p), reference=PAPER_OPTIMUM)
     assert p.stat().st_size > 10_000
+
+
+class _LinearAngles:
+    """Two angles linear in one friction coefficient [deg]."""
+
+    def predict(self, X):
+        x = np.asarray(X, float)[:, 0]
+        return np.column_stack([20.0 + 20.0 * x, 35.0 + 10.0 * x])
+
+
+def test_one_parameter_calibration_plots_its_acceptable_interval(tmp_path):
+    """A campaign of one calibrated parameter ends with a plot too (the pairwise grid has no panel)."""
+    space = ParameterSpace.from_bounds(["mu_s_pp"], [0.1], [0.9], units=["-"])
+    res = calibrate(_LinearAngles(), [30.0, 40.0], space, tolerance=1.0,
+                    settings=NSGA2Settings(pop_size=20, n_generations=10, seed=0), n_dense=2000,
+                    response_names=["alpha", "beta"])
+    assert len(res.acceptable_X) > 0
+    p = tmp_path / "acc1.png"
+    plot_acceptable_set(res, str(p))
+    assert p.stat().st_size > 10_000
