@@ -104,11 +104,11 @@ def test_plugin_submodel_from_a_campaign_config_is_calibrated(tmp_path, monkeypa
     assert cfg.space.names == ["glue_stiffness_pp"] and cfg.space.parameters[0].unit == "N/m"
     seen = []
 
-    def fake_run(self, parameter_sets, device=None, progress=False, processes=1):
+    def fake_run(self, parameter_sets, device=None, progress=False, processes=1, **kwargs):
         # the experiment got the law with the plugin's sub-model, and builds a model with it
         assert self.contact_law.cohesion == "test_linear_glue"
         seen.extend(p["glue_stiffness_pp"] for p in parameter_sets)
-        return orig_run(self, parameter_sets, device=device, progress=False, processes=1)
+        return orig_run(self, parameter_sets, device=device, progress=False, processes=1, **kwargs)
 
     from calibration.experiments.common import Experiment
 
