@@ -24,7 +24,7 @@ from .materials import BulkMaterial
 
 __all__ = ["ModelDescription", "contact_law_from_config", "contact_law_to_dict", "load_plugins"]
 
-LAW_KEYS = ("normal", "tangential", "rolling", "cohesion", "track_wear")
+LAW_KEYS = ("normal", "tangential", "rolling", "cohesion", "track_wear", "clump_damping_mass")
 
 
 def load_plugins(paths: Sequence[str], base_dir: Path | str = ".") -> tuple[str, ...]:
@@ -52,7 +52,9 @@ def load_plugins(paths: Sequence[str], base_dir: Path | str = ".") -> tuple[str,
 
 def contact_law_from_config(raw: Any, where: str = "contact_law") -> wd.ContactLaw:
     """A :class:`warpdem.ContactLaw` from a mapping ``{rolling: epsd2, cohesion: sjkr, ...}``
-    (a ContactLaw is returned as is); unknown keys and models are named in the error."""
+    (a ContactLaw is returned as is); unknown keys and models are named in the error.
+    ``clump_damping_mass: contact_point | body`` picks the mass that damps a clump's contacts
+    (:class:`warpdem.ContactLaw`; default ``contact_point``)."""
     if isinstance(raw, wd.ContactLaw):
         return raw
     if raw is None:

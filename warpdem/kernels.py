@@ -204,6 +204,24 @@ def mass_felt_at(m: float, i_mean: float, lever: wp.vec3, n: wp.vec3):
 
 
 @wp.func
+def whole_body_mass(m: float, i_mean: float, lever: wp.vec3, n: wp.vec3):
+    """The body's whole mass m [kg] as the contact's damping mass, whatever the lever (the
+    convention of LIGGGHTS ``fix multisphere`` and many codes); same arguments as
+    :func:`mass_felt_at`, which it replaces for ``ContactLaw(clump_damping_mass="body")``."""
+    return m
+
+
+def damping_mass_function(convention: str) -> "wp.Function":
+    """The ``wp.func`` (m, i_mean, lever, n) -> m_i [kg] of a clump damping convention
+    (:attr:`warpdem.contact.law.ContactLaw.clump_damping_mass`), chosen when a stage kernel is
+    built, so the default costs nothing at run time."""
+    functions = {"contact_point": mass_felt_at, "body": whole_body_mass}
+    if convention not in functions:
+        raise ValueError(f"unknown clump_damping_mass {convention!r}; valid: {list(functions)}")
+    return functions[convention]
+
+
+@wp.func
 def angular_velocity_from_momentum(r: wp.quatd, l: wp.vec3d, inertia: wp.vec3d):
     """w = R I^-1 R^T L (world frame) for principal inertia ``inertia``."""
     return wp.quat_rotate(r, wp.cw_div(wp.quat_rotate_inv(r, l), inertia))

@@ -6,6 +6,9 @@ from dataclasses import dataclass, field
 from ..errors import ConfigError
 from .base import KINDS, PAIR_TYPES, REGISTRY, ParameterSpec, SubModel
 
+#: Which mass damps a clump's contact (:attr:`ContactLaw.clump_damping_mass`); the first is the default.
+CLUMP_DAMPING_MASSES = ("contact_point", "body")
+
 
 @dataclass(frozen=True)
 class ContactLaw:
@@ -14,6 +17,21 @@ class ContactLaw:
     Args:
         normal, tangential, rolling, cohesion: registered sub-model names.
         track_wear: accumulate per-triangle wall contact energy and impulse.
+        clump_damping_mass: the mass m_i [kg] that sizes a clump's contact damping (m* in the
+            normal and tangential dashpots, F^d = -2 sqrt(5/6) beta sqrt(S m*) v; seed paper
+            eqs. (5), (9)), with m* = m_i m_j / (m_i + m_j) (a wall: m* = m_i):
+
+            - ``"contact_point"`` (default): the mass felt at the contact point along the normal,
+              m_i = 1 / (1/m + |r x n|^2 / I_mean) (:func:`warpdem.kernels.mass_felt_at`; r: the
+              member sphere's centre from the body's centre of mass [m], I_mean: mean principal
+              moment [kg m^2]). An off-centre contact also turns the body, so the contact point
+              moves with less than m; damped for that mass, it rebounds with the restitution it
+              is given (Kruggel-Emden et al. 2008, Powder Technol. 188:153).
+            - ``"body"``: the whole-body mass, m_i = m (LIGGGHTS ``fix multisphere`` and many
+              codes). An off-centre contact is then over-damped: its rebound at the contact
+              point is below the set restitution.
+
+            Spheres, and contacts on a line through a clump's centre of mass, feel m either way.
     """
 
     normal: str = "hertz"
@@ -21,12 +39,16 @@ class ContactLaw:
     rolling: str = "none"
     cohesion: str = "none"
     track_wear: bool = True
+    clump_damping_mass: str = "contact_point"
     submodels: dict[str, SubModel] = field(init=False, repr=False, compare=False)
     # the registered classes: two laws naming the same sub-models are equal (and share a
     # compiled kernel) only while the names resolve to the same classes
     implementation: tuple[type[SubModel], ...] = field(init=False, repr=False, compare=True)
 
     def __post_init__(self) -> None:
+        if self.clump_damping_mass not in CLUMP_DAMPING_MASSES:
+            raise ConfigError(f"unknown clump_damping_mass {self.clump_damping_mass!r}; valid: "
+                              f"{list(CLUMP_DAMPING_MASSES)} (the mass felt at the contact point, or the whole-body mass)")
         subs = {}
         for kind in KINDS:
             name = getattr(self, kind)
@@ -44,7 +66,8 @@ class ContactLaw:
     def __reduce__(self):
         # pickled by names: the receiving process resolves them in its own registry (load the
         # same plugins there first)
-        return (type(self), (self.normal, self.tangential, self.rolling, self.cohesion, self.track_wear))
+        return (type(self), (self.normal, self.tangential, self.rolling, self.cohesion, self.track_wear,
+                             self.clump_damping_mass))
 
     @property
     def specs(self) -> dict[str, ParameterSpec]:
@@ -95,7 +118,12 @@ class ContactLaw:
         return self.submodels["rolling"].needs_history
 
     def describe(self) -> str:
-        return f"{self.normal}+{self.tangential}+rolling:{self.rolling}+cohesion:{self.cohesion}"
+        """``hertz+mindlin+rolling:epsd+cohesion:none``; a non-default clump damping mass is
+        appended (``+clump_damping:body``), so the default law's text is unchanged."""
+        text = f"{self.normal}+{self.tangential}+rolling:{self.rolling}+cohesion:{self.cohesion}"
+        if self.clump_damping_mass != CLUMP_DAMPING_MASSES[0]:
+            text += f"+clump_damping:{self.clump_damping_mass}"
+        return text
 
     def references(self) -> dict[str, str]:
         return {k: f"{s.name}: {s.reference}" for k, s in self.submodels.items()}

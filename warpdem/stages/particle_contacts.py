@@ -8,7 +8,7 @@ import warp as wp
 
 from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
-from ..kernels import effective_shear_modulus, effective_youngs_modulus, mass_felt_at
+from ..kernels import damping_mass_function, effective_shear_modulus, effective_youngs_modulus
 from .law import law_evaluator
 from .structs import ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSlots
 
@@ -24,13 +24,15 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
     r_i + r_j: normal n = (x_i - x_j) / |x_i - x_j|, overlap delta = r_i + r_j - |x_i - x_j|,
     contact point p = x_i - (r_i - delta / 2) n; last step's history of partner j is taken;
     R* = r_i r_j / (r_i + r_j), m* = m_i m_j / (m_i + m_j) with the masses felt at p
-    (:func:`warpdem.kernels.mass_felt_at`), I* = I_i I_j / (I_i + I_j). The contacts are
+    (:func:`warpdem.kernels.mass_felt_at`; the whole-body masses with
+    ``law.clump_damping_mass == "body"``), I* = I_i I_j / (I_i + I_j). The contacts are
     appended after the wall contacts of stage 1 (``found.count``) and the forces added, in
     neighbour order, to the sums of stage 2 (zero without wall contacts), so the result does
     not depend on the split into stages. Also the stage that finishes every sphere's row:
     inactive spheres get no contacts; a paused world keeps its history unchanged and feels no
     force."""
     evaluate = law_evaluator(law)
+    damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     roll_hist = bool(law.needs_rolling_history)
 
     @wp.kernel
@@ -117,8 +119,8 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
             c.r_eff = ri * rj / rr
             c.radius_i = ri
             c.radius_j = rj
-            m_i = mass_felt_at(me.m, ib_mean, xi - xb, nrm)
-            m_j = mass_felt_at(other.m, ibj_mean, other.x - xbj, nrm)
+            m_i = damping_mass(me.m, ib_mean, xi - xb, nrm)
+            m_j = damping_mass(other.m, ibj_mean, other.x - xbj, nrm)
             c.m_eff = m_i * m_j / (m_i + m_j)
             c.e_eff = effective_youngs_modulus(e_i, nu_i, e_j, nu_j)
             c.g_eff = effective_shear_modulus(e_i, nu_i, e_j, nu_j)

@@ -14,7 +14,7 @@ import warp as wp
 from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
 from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, closest_point_triangle, effective_shear_modulus,
-                       effective_youngs_modulus, mass_felt_at, point_in_wall_rest_frame, wall_is_moving,
+                       damping_mass_function, effective_youngs_modulus, point_in_wall_rest_frame, wall_is_moving,
                        wall_point_velocity)
 from .law import law_evaluator
 from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
@@ -169,12 +169,13 @@ def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
     For each wall contact that stage 1 found: last step's history of the same wall is taken if
     its normal agrees (cosine > WALL_MATCH_COS); the wall material's velocity at the contact
     point (v + w x (p - c(t)) while the wall moves) gives the relative motion; the law gives
-    fn, ft and the rolling torque. Writes the springs into this step's history, the summed
+    fn, ft and the rolling torque (damped for the mass of ``law.clump_damping_mass``). Writes the springs into this step's history, the summed
     force F = sum (fn n + ft) [N] and torque T = sum ((p - x_b) x F + torque) [N m] about the
     body's centre into ``forces`` (the particle stage adds on), and, if the law tracks wear,
     the per-triangle accumulators (atomic adds: many spheres touch one triangle). A sphere
     without wall contacts returns at once and writes nothing."""
     evaluate = law_evaluator(law)
+    damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     track_wear = bool(law.track_wear)
     roll_hist = bool(law.needs_rolling_history)
 
@@ -233,7 +234,7 @@ def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
             c.radius_i = ri
             c.radius_j = 0.0  # a wall: flat partner (infinite radius)
             # lever x n: the contact point lies on the line through the sphere centre along n
-            c.m_eff = mass_felt_at(me.m, me.i_mean, xi - xb, nrm)
+            c.m_eff = damping_mass(me.m, me.i_mean, xi - xb, nrm)
             c.e_eff = effective_youngs_modulus(e_i, nu_i, e_w, nu_w)
             c.g_eff = effective_shear_modulus(e_i, nu_i, e_w, nu_w)
             c.arm = ri - depth
