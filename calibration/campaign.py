@@ -53,7 +53,8 @@ from .campaign_records import (RECORD_FORMAT, append_records, code_version, desc
                                plain, plugin_hashes, read_records, write_atomic)
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
-from .experiments.common import BatchCheckpoints, _jsonable, clear_checkpoints, cpu_processes
+from .experiments.checkpoints import BatchCheckpoints, clear_checkpoints
+from .experiments.common import _jsonable, cpu_processes
 from .measurement.records import load_measurements
 from .model_description import ModelDescription
 
@@ -105,7 +106,7 @@ class VtkOutput(BaseModel):
 class CheckpointSettings(BaseModel):
     """Config section ``checkpoints``: a campaign's batches save their simulation into
     ``<output>/checkpoints/`` while they run, so a killed campaign resumes mid-batch
-    (:class:`calibration.experiments.common.BatchCheckpoints`; docs/campaign_records.md).
+    (:class:`calibration.experiments.checkpoints.BatchCheckpoints`; docs/campaign_records.md).
 
     enabled: checkpoint the batches (default true). every_s: wall-clock seconds between saves [s]
     (>= 0; a save also ends every batch's protocol)."""

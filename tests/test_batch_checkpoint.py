@@ -18,8 +18,9 @@ import yaml
 
 import calibration.campaign as cp
 import warpdem as wd
-from calibration.experiments import common, make_experiment
-from calibration.experiments.common import BatchCheckpoints, _jsonable
+from calibration.experiments import checkpoints, make_experiment
+from calibration.experiments.checkpoints import BatchCheckpoints
+from calibration.experiments.results_json import jsonable
 
 ROOT = Path(__file__).parents[1]
 # ~55 spheres of 14-18 mm per world in the quick cylinder (about 5 s per batch of 2 worlds; both measure a pile)
@@ -37,7 +38,7 @@ def kill_after_save(monkeypatch, n: int) -> list:
     """Make the ``n``-th checkpoint save of the next run raise :class:`Killed` once the files are
     written; returns the list of (protocol step label or None, steps) of every save."""
     saves = []
-    plain_save = common._BatchCheckpoint.save
+    plain_save = checkpoints.BatchCheckpoint.save
 
     def save(self, ctx, inner):
         plain_save(self, ctx, inner)
@@ -45,7 +46,7 @@ def kill_after_save(monkeypatch, n: int) -> list:
         if len(saves) == n:
             raise Killed()
 
-    monkeypatch.setattr(common._BatchCheckpoint, "save", save)
+    monkeypatch.setattr(checkpoints.BatchCheckpoint, "save", save)
     return saves
 
 
@@ -64,7 +65,7 @@ def count_steps(monkeypatch) -> list:
 
 def outcome(results) -> list:
     """What must not depend on an interruption: status, angle, observables, diagnostics (JSON)."""
-    return [json.dumps(_jsonable(dict(status=r.status, error=r.error, angle=r.angle_deg, obs=r.observables,
+    return [json.dumps(jsonable(dict(status=r.status, error=r.error, angle=r.angle_deg, obs=r.observables,
                                       diag=r.diagnostics, steps=r.timing["steps"],
                                       phases=r.timing["phases_s"])), sort_keys=True) for r in results]
 
