@@ -8,7 +8,10 @@ One JSON line per (convention, rpm): mean dynamic angle, its standard error over
 and the per-fill angles (fill k is the same packing in both conventions), then one line per
 rpm with the paired difference body - contact_point.
 
-    python benchmarks/clump_damping.py --scale quick --device cpu --rpms 45 15 --fills 3
+    python benchmarks/clump_damping.py --scale quick --device cpu --rpms 45 15 --fills 3 | grep '^{'
+
+(worker processes print Warp's start-up lines on stdout; ``grep '^{'`` keeps the JSON.)
+Measured: benchmarks/RESULTS.md, "Clump contact damping" (about 19 min on 2 shared CPU cores).
 """
 from __future__ import annotations
 
