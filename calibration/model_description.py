@@ -11,6 +11,7 @@ with their units and admissible bounds, so a config is checked before any DEM ru
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +26,8 @@ from .materials import BulkMaterial
 __all__ = ["ModelDescription", "contact_law_from_config", "contact_law_to_dict", "load_plugins"]
 
 LAW_KEYS = ("normal", "tangential", "rolling", "cohesion", "track_wear", "clump_damping_mass")
+LAW_KEYS_LISTED_WHEN_SET = ("clump_damping_mass",)
+LAW_DEFAULTS = {f.name: f.default for f in dataclasses.fields(wd.ContactLaw)}
 
 
 def load_plugins(paths: Sequence[str], base_dir: Path | str = ".") -> tuple[str, ...]:
@@ -72,7 +75,10 @@ def contact_law_from_config(raw: Any, where: str = "contact_law") -> wd.ContactL
 
 def contact_law_to_dict(law: wd.ContactLaw) -> dict[str, Any]:
     """Every sub-model of a law, its parameters (unit, bounds) and references, JSON-able."""
-    out: dict[str, Any] = {k: getattr(law, k) for k in LAW_KEYS}
+    # a setting added after records and DEM caches were written is listed only when it is not its
+    # default, so the record of an unchanged law (and every cache key built from it) stays the same
+    out: dict[str, Any] = {k: getattr(law, k) for k in LAW_KEYS
+                           if k not in LAW_KEYS_LISTED_WHEN_SET or getattr(law, k) != LAW_DEFAULTS[k]}
     out["describe"] = law.describe()
     out["references"] = law.references()
     out["parameters"] = {n: {"unit": s.unit, "bounds": list(s.bounds), "default": s.default,

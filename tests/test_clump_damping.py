@@ -219,7 +219,10 @@ def test_option_travels_from_a_config_and_names_itself():
     assert wd.ContactLaw().describe() == "hertz+mindlin+rolling:none+cohesion:none"  # default text unchanged
     desc = ModelDescription.from_config({"contact_law": {"clump_damping_mass": "contact_point"}})
     assert desc.contact_law == wd.ContactLaw()
-    assert desc.describe()["contact_law"]["clump_damping_mass"] == "contact_point"
+    # the default is left out of records, so records and DEM-cache keys of earlier laws stay valid
+    assert "clump_damping_mass" not in desc.describe()["contact_law"]
+    body = ModelDescription.from_config({"contact_law": {"clump_damping_mass": "body"}})
+    assert body.describe()["contact_law"]["clump_damping_mass"] == "body"
     import pickle
 
     assert pickle.loads(pickle.dumps(law)) == law
@@ -231,3 +234,18 @@ def test_bad_clump_damping_mass_is_refused_by_name(bad):
         wd.ContactLaw(clump_damping_mass=bad)
     with pytest.raises(ConfigError, match=r"contact_law: unknown clump_damping_mass"):
         ModelDescription.from_config({"contact_law": {"clump_damping_mass": bad}})
+
+
+def test_the_convention_is_part_of_the_model_fingerprint_and_the_checkpoint(tmp_path):
+    """A 'body' model is another model (a checkpoint of one is refused by the other), and a
+    checkpoint restores its convention."""
+    from warpdem.io import load_checkpoint, save_checkpoint
+
+    models = {}
+    for convention in ("contact_point", "body"):
+        b = builder(convention)
+        b.add_spheres([[0.0, 0.0, 0.0]], R_MEMBER, "gravel")
+        models[convention] = b.finalize("cpu")
+    assert models["body"].fingerprint != models["contact_point"].fingerprint
+    path = save_checkpoint(tmp_path / "body.npz", wd.Simulation(models["body"], 1e-6))
+    assert load_checkpoint(path, "cpu").model.contact_law.clump_damping_mass == "body"

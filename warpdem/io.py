@@ -164,7 +164,7 @@ def save_checkpoint(path: str | os.PathLike, sim) -> Path:
     law = m.contact_law
     meta = dict(
         version=2, fingerprint=m.fingerprint, v_ref=sim.solver.v_ref, force=sim.solver.force, law=dict(normal=law.normal, tangential=law.tangential, rolling=law.rolling, cohesion=law.cohesion,
-                            track_wear=law.track_wear),
+                            track_wear=law.track_wear, clump_damping_mass=law.clump_damping_mass),
         materials=[dict(name=x.name, youngs_modulus=x.youngs_modulus, poisson_ratio=x.poisson_ratio, density=x.density)
                    for x in m.materials],
         walls=[dict(name=w.name, material=w.material, world=w.world, tri_offset=w.tri_offset,
