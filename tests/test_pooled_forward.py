@@ -187,3 +187,27 @@ def test_a_torn_dem_cache_line_is_reported_dropped_and_later_appends_stay_readab
     again = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)
     assert set(again._cache) == {"a", "b", "d"}
     assert "torn" not in capsys.readouterr().err
+
+
+def test_a_world_found_again_with_round_off_parameters_is_served_from_the_cache(tmp_path):
+    """A best fit found again on another machine differs in its last digits; the cached world with
+    (relatively) 1e-12 different parameters is reused, one 1e-6 away or of another model is not."""
+    import warpdem as wd
+    from calibration.model_description import ModelDescription
+    from validation.dem_forward import DEMForwardModel
+
+    forward = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=tmp_path / "c.jsonl")
+    params = {"mu_s_pp": 0.47429896119979187, "mu_s_pw": 0.36016236828610326}
+    wid = forward._world_id("model", "setup", params, 0, None)
+    forward._store({"id": wid, "experiment": "baffle", "status": "ok", "parameters": params, "replicate": 0,
+                    "rpm": None, "observables": {"static_angle": 21.0}})
+
+    def near(rel: float, model: str = "model") -> bool:
+        moved = {k: v * (1 + rel) for k, v in params.items()}
+        return forward._adopt_near_record(forward._world_id(model, "setup", moved, 0, None), model, "setup",
+                                          "baffle", moved, 0, None)
+
+    assert near(2e-11)
+    assert not near(1e-6)
+    assert not near(2e-11, model="another model")
+    assert len((tmp_path / "c.jsonl").read_text().splitlines()) == 1  # an alias is not written again

@@ -47,6 +47,11 @@ class ObservableSpec:
     settings: Mapping[str, Any] = field(default_factory=dict)
 
 
+#: Parameter sets equal within this relative difference are the same DEM world (float round-off
+#: of a best fit found again on another machine; :meth:`DEMForwardModel._adopt_near_record`).
+NEAR_PARAMETER_RTOL = 1e-9
+
+
 def _fingerprint(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
@@ -207,6 +212,26 @@ class DEMForwardModel(ForwardModel):
     def _world_id(self, model_fp: str, exp_fp: str, params: Mapping[str, float], rep: int, rpm: float | None) -> str:
         return _fingerprint([model_fp, exp_fp, {k: round(float(v), 12) for k, v in sorted(params.items())}, rep, rpm])
 
+    def _adopt_near_record(self, wid: str, model_fp: str, exp_fp: str, experiment: str,
+                           params: Mapping[str, float], rep: int, rpm: float | None) -> bool:
+        """Serve a world from a cached record whose parameters differ from ``params`` by float
+        round-off only (relative ``NEAR_PARAMETER_RTOL``). A best fit found again on another
+        machine differs in its last digits (another BLAS under the surrogates' optimiser), which
+        would otherwise re-run a world already simulated. The record must recompute to its own id
+        under this model and setup (``model_fp``, ``exp_fp``), so it is the same world up to the
+        parameter round-off; it is then known under ``wid`` too (in memory, not written again)."""
+        for rec in self._cache.values():
+            if rec.get("experiment") != experiment or rec.get("replicate") != rep or rec.get("rpm") != rpm:
+                continue
+            got = rec.get("parameters") or {}
+            if set(got) != set(params):
+                continue
+            if all(abs(float(got[k]) - float(v)) <= NEAR_PARAMETER_RTOL * max(abs(float(v)), abs(float(got[k])))
+                   for k, v in params.items()) and self._world_id(model_fp, exp_fp, got, rep, rpm) == rec["id"]:
+                self._cache[wid] = rec
+                return True
+        return False
+
     def _store(self, rec: dict[str, Any]) -> None:
         self._cache[rec["id"]] = rec
         if self.cache_path is not None:
@@ -240,7 +265,8 @@ class DEMForwardModel(ForwardModel):
                 for r in range(replicates):
                     for rpm in rpms:
                         wid = self._world_id(model_fp, exp_fp, ps, r, rpm)
-                        if wid not in self._cache:
+                        if wid not in self._cache and not self._adopt_near_record(wid, model_fp, exp_fp, exp_name,
+                                                                                  ps, r, rpm):
                             todo.append((i, r, rpm, wid))
             if todo:
                 self._run_worlds(exp_name, settings, desc, parameter_sets, todo)
