@@ -81,40 +81,54 @@ def load_config(path_or_dict: str | Path | dict) -> dict:
         if not isinstance(raw, dict):
             raise ConfigError(f"{p}: a pump config must be a mapping of sections")
         where = str(p)
+    problems: list[str] = []  # every problem of the file, reported together
     unknown = sorted(set(raw) - set(SECTIONS))
     if unknown:
-        raise ConfigError(f"{where}: unknown section(s) {unknown}; valid: {sorted(SECTIONS)}")
+        problems.append(f"unknown section(s) {unknown}; valid: {sorted(SECTIONS)}")
+    try:
+        seed = int(raw.get("seed", 0))
+    except (TypeError, ValueError):
+        problems.append(f"seed must be an integer, got {raw.get('seed')!r}")
+        seed = 0
     cfg: dict[str, Any] = {"name": raw.get("name", "pump"), "device": raw.get("device", "cpu"),
-                           "output": raw.get("output", "results/pump"), "seed": int(raw.get("seed", 0)),
+                           "output": raw.get("output", "results/pump"), "seed": seed,
                            "design": dict(raw.get("design") or {}), "gravity": raw.get("gravity", [0.0, -9.81, 0.0]),
                            "notes": raw.get("notes", "")}
     for sec, defaults in DEFAULTS.items():
         given = raw.get(sec) or {}
         if not isinstance(given, dict):
-            raise ConfigError(f"{where}: section '{sec}' must be a mapping")
+            problems.append(f"section '{sec}' must be a mapping")
+            given = {}
         if sec != "contact":  # contact takes any contact-parameter name (checked by the builder)
             bad = sorted(set(given) - set(defaults))
             if bad:
-                raise ConfigError(f"{where}: unknown key(s) {bad} in '{sec}'; valid: {sorted(defaults)}")
+                problems.append(f"unknown key(s) {bad} in '{sec}'; valid: {sorted(defaults)}")
         cfg[sec] = {**defaults, **given}
     run = cfg["run"]
     for k in ("revolutions", "dt", "update_every", "record_every", "vtk_every"):
-        if not (isinstance(run[k], (int, float)) and run[k] > 0):
-            raise ConfigError(f"{where}: run.{k} must be > 0, got {run[k]!r}")
+        if not (isinstance(run[k], (int, float)) and not isinstance(run[k], bool) and run[k] > 0):
+            problems.append(f"run.{k} must be > 0, got {run[k]!r}")
     cp = cfg["coupling"]
     if not isinstance(cp["two_way"], bool):
-        raise ConfigError(f"{where}: coupling.two_way must be true or false, got {cp['two_way']!r}")
+        problems.append(f"coupling.two_way must be true or false, got {cp['two_way']!r}")
     if isinstance(cp["relaxation"], bool) or not isinstance(cp["relaxation"], (int, float)) \
             or not (math.isfinite(cp["relaxation"]) and 0 <= cp["relaxation"] <= 100):
-        raise ConfigError(f"{where}: coupling.relaxation must be a number in [0, 100] (factor on the flow-through "
-                          f"rate |u0| / voidage_cell; 0: no decay), got {cp['relaxation']!r}")
-    if int(run["worlds"]) < 1:
-        raise ConfigError(f"{where}: run.worlds must be >= 1, got {run['worlds']}")
+        problems.append(f"coupling.relaxation must be a number in [0, 100] (factor on the flow-through rate "
+                        f"|u0| / voidage_cell; 0: no decay), got {cp['relaxation']!r}")
+    if isinstance(run["worlds"], bool) or not isinstance(run["worlds"], int) or run["worlds"] < 1:
+        problems.append(f"run.worlds must be an integer >= 1, got {run['worlds']!r}")
     if cfg["device"] not in ("cpu", "cuda") and not str(cfg["device"]).startswith("cuda:"):
-        raise ConfigError(f"{where}: device must be 'cpu' or 'cuda', got {cfg['device']!r}")
-    g = np.asarray(cfg["gravity"], dtype=float)
-    if g.shape != (3,):
-        raise ConfigError(f"{where}: gravity must be 3 numbers [m/s^2], got {cfg['gravity']!r}")
+        problems.append(f"device must be 'cpu' or 'cuda', got {cfg['device']!r}")
+    try:
+        g_ok = np.asarray(cfg["gravity"], dtype=float).shape == (3,)
+    except (TypeError, ValueError):
+        g_ok = False
+    if not g_ok:
+        problems.append(f"gravity must be 3 numbers [m/s^2], got {cfg['gravity']!r}")
+    if len(problems) == 1:
+        raise ConfigError(f"{where}: {problems[0]}")
+    if problems:
+        raise ConfigError(f"{where}: {len(problems)} problems:\n" + "\n".join(f"  - {m}" for m in problems))
     return cfg
 
 

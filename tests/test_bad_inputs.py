@@ -124,3 +124,27 @@ def test_a_user_mistake_is_refused_with_a_message_that_names_it(case, tmp_path, 
     assert "Traceback" not in err, err
     for word in words:
         assert word in err, f"{name}: the message does not name {word!r}:\n{err}"
+
+
+def test_every_problem_of_an_experiment_config_is_listed_in_one_message(tmp_path, capsys):
+    """Two mistakes at the top level, or in the settings and the parameters, are named together
+    (fixing one at a time would cost a run each), before any DEM runs."""
+    top = tmp_path / "top.yaml"
+    top.write_text(yaml.safe_dump({**EXPERIMENT, "experiment": "baffel", "paramters": []}))
+    assert experiment_main([str(top)]) == 2
+    err = capsys.readouterr().err
+    assert "2 problems" in err and "baffel" in err and "paramters" in err
+    deep = tmp_path / "deep.yaml"
+    deep.write_text(yaml.safe_dump({**EXPERIMENT, "settings": {"lift_sped": 0.2},
+                                    "parameters": [{"mu_s_pp": 0.3}, {"mu_s_pw": -0.5}]}))
+    assert experiment_main([str(deep)]) == 2
+    err = capsys.readouterr().err
+    assert "lift_sped" in err and "parameters[1].mu_s_pw = -0.5" in err, err
+
+
+def test_every_problem_of_a_pump_config_is_listed_in_one_message(tmp_path, capsys):
+    path = tmp_path / "pump.yaml"
+    path.write_text(yaml.safe_dump({**edited(edited(PUMP, "run.dt", 0.0), "coupling.two_way", "yes"), "fluidd": {}}))
+    assert pump_main([str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "3 problems" in err and "fluidd" in err and "run.dt" in err and "coupling.two_way" in err, err

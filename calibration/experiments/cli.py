@@ -48,32 +48,86 @@ def load_config(path: str | os.PathLike) -> dict[str, Any]:
                           f"{' '.join(str(exc).split())}") from None
     cfg = check_config(cfg, str(p))
     cfg["_base_dir"] = str(p.parent)
+    problems = deeper_problems(cfg)
+    if problems:
+        raise ConfigError(f"{p}: {len(problems)} problem{'s' if len(problems) > 1 else ''}:\n" + "\n".join(f"  - {m}" for m in problems))
     return cfg
 
 
+def deeper_problems(cfg: Mapping[str, Any]) -> list[str]:
+    """Every problem below the top level, before any DEM runs: the model (material, contact law,
+    plugins), the experiment's scale and settings, and each parameter set (names, numbers, the
+    sub-models' admissible bounds). Each stage is checked even when another failed, so one
+    message can list them all."""
+    from ..model_description import ModelDescription
+    from .common import normalize_parameter_sets
+
+    problems: list[str] = []
+    model = None
+    try:
+        model = ModelDescription.from_config(cfg, base_dir=cfg.get("_base_dir", "."))
+    except (ConfigError, ValueError, TypeError) as exc:
+        problems.append(f"model (material, contact_law, plugins): {exc}")
+    settings = dict(cfg.get("settings") or {})
+    if model is not None:
+        if model.material is not None:
+            settings["material"] = model.material
+        settings.update(contact_law=model.contact_law, plugins=model.plugins)
+    exp = None
+    try:
+        exp = make_experiment(cfg["experiment"], cfg.get("scale", "paper"), **settings)
+    except (ConfigError, ValueError, TypeError) as exc:
+        problems.append(f"experiment {cfg['experiment']!r} (scale, settings): {exc}")
+        try:  # the parameter sets are still checked, against the experiment without the user's settings
+            model_only = {k: settings[k] for k in ("material", "contact_law", "plugins") if k in settings}
+            exp = make_experiment(cfg["experiment"], cfg.get("scale", "paper"), **model_only)
+        except (ConfigError, ValueError, TypeError):
+            exp = None
+    if exp is not None and model is not None:
+        try:
+            sets = normalize_parameter_sets(cfg["parameters"], exp.parameter_names)
+        except ConfigError as exc:
+            problems.append(f"parameters: {exc}")
+        else:
+            specs = model.parameter_specs(exp.bulk_material())  # per pair type (mu_s_pp, ...) and shape
+            for w, ps in enumerate(sets):
+                for name, value in ps.items():
+                    spec = specs.get(name)
+                    if spec is not None and not spec.bounds[0] <= value <= spec.bounds[1]:
+                        problems.append(f"parameters[{w}].{name} = {value} [{spec.unit}] is outside its admissible "
+                                        f"range [{spec.bounds[0]}, {spec.bounds[1]}]")
+    return problems
+
+
 def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
-    """Validate the top level of a config mapping (unknown keys raise ConfigError)."""
+    """Validate the top level of a config mapping; every problem found is listed in one ConfigError."""
     if not isinstance(cfg, Mapping):
         raise ConfigError(f"{source}: an experiment config must be a mapping, got {type(cfg).__name__}")
+    problems: list[str] = []
     unknown = sorted(set(cfg) - set(CONFIG_KEYS))
     if unknown:
-        raise ConfigError(f"{source}: unknown key(s) {unknown}; valid: {list(CONFIG_KEYS)}")
+        problems.append(f"unknown key(s) {unknown}; valid: {list(CONFIG_KEYS)}")
     if "experiment" not in cfg:
-        raise ConfigError(f"{source}: missing 'experiment' (one of {sorted(EXPERIMENTS)})")
-    if cfg["experiment"] not in EXPERIMENTS:
-        raise ConfigError(f"{source}: unknown experiment {cfg['experiment']!r}; valid: {sorted(EXPERIMENTS)}")
+        problems.append(f"missing 'experiment' (one of {sorted(EXPERIMENTS)})")
+    elif cfg["experiment"] not in EXPERIMENTS:
+        problems.append(f"unknown experiment {cfg['experiment']!r}; valid: {sorted(EXPERIMENTS)}")
     if "parameters" not in cfg:
-        raise ConfigError(f"{source}: missing 'parameters' (a list of per-world contact parameter sets)")
+        problems.append("missing 'parameters' (a list of per-world contact parameter sets)")
     settings = cfg.get("settings") or {}
     if not isinstance(settings, Mapping):
-        raise ConfigError(f"{source}: 'settings' must be a mapping of experiment settings")
+        problems.append("'settings' must be a mapping of experiment settings")
+        settings = {}
     if "material" in settings and "material" in cfg:
-        raise ConfigError(f"{source}: give 'material' either at the top level or in 'settings', not both")
+        problems.append("give 'material' either at the top level or in 'settings', not both")
     if "scale" in settings:
-        raise ConfigError(f"{source}: put 'scale' at the top level, not in 'settings'")
+        problems.append("put 'scale' at the top level, not in 'settings'")
     for k in ("contact_law", "plugins"):
         if k in settings:
-            raise ConfigError(f"{source}: put '{k}' at the top level, not in 'settings'")
+            problems.append(f"put '{k}' at the top level, not in 'settings'")
+    if len(problems) == 1:
+        raise ConfigError(f"{source}: {problems[0]}")
+    if problems:
+        raise ConfigError(f"{source}: {len(problems)} problems:\n" + "\n".join(f"  - {m}" for m in problems))
     return dict(cfg)
 
 
