@@ -444,6 +444,24 @@ class SettleReport:
     failed: dict = field(default_factory=dict)
 
 
+@dataclass
+class SettleProgress:
+    """Where a :meth:`Simulation.settle` loop stands after a chunk: steps done, bodies removed,
+    the last kinetic energy per active body per world [J], which worlds are paused and which met
+    the criterion. Handed to ``after_chunk`` and taken back as ``start`` to continue the loop
+    (e.g. from a checkpoint) exactly where it stood."""
+
+    done: int
+    removed: int
+    ke_report: np.ndarray
+    paused: np.ndarray
+    met: np.ndarray
+
+    @classmethod
+    def fresh(cls, num_worlds: int) -> "SettleProgress":
+        return cls(0, 0, np.zeros(num_worlds), np.zeros(num_worlds, dtype=bool), np.zeros(num_worlds, dtype=bool))
+
+
 class Simulation:
     """Owns two States and a solver; runs many steps with periodic checks.
 
@@ -589,7 +607,9 @@ class Simulation:
 
     def settle(self, ke_per_particle: float = 1.0e-6, max_time: float | np.ndarray = 1.5,
                check_interval: float = 0.01, min_time: float | np.ndarray = 0.0,
-               remove_box: tuple | None = None, on_unstable: str | None = None) -> "SettleReport":
+               remove_box: tuple | None = None, on_unstable: str | None = None,
+               start: SettleProgress | None = None,
+               after_chunk: Callable[[SettleProgress], None] | None = None) -> "SettleReport":
         """Run until the mean kinetic energy per active body of every world is below
         ``ke_per_particle`` [J] after ``min_time``, or ``max_time`` [s] passed (scalars or one
         value per world). Bodies leaving ``remove_box`` = (lower, upper) [m] are removed at each
@@ -599,7 +619,10 @@ class Simulation:
         is paused at rest (:meth:`pause_worlds`) while the others go on, and all are released at
         the end, so a world's settled state does not depend on the other worlds of its batch.
         ``on_unstable``: as in :meth:`run`; with ``"freeze"`` a world frozen as unstable stops
-        (it does not count as settled) and is listed in the report's ``failed``."""
+        (it does not count as settled) and is listed in the report's ``failed``.
+        ``start``: continue a loop from this :class:`SettleProgress` (default: from the beginning);
+        ``after_chunk``: called with the progress after every chunk that leaves a world running
+        (a checkpoint hook)."""
         nw = self.model.num_worlds
         max_w = np.broadcast_to(np.asarray(max_time, dtype=float), (nw,))
         min_w = np.broadcast_to(np.asarray(min_time, dtype=float), (nw,))
@@ -607,12 +630,14 @@ class Simulation:
             raise ConfigError(f"settle: times must be >= 0, got min {min_time}, max {max_time}")
         chunk = max(1, int(round(check_interval / self.dt)))
         n_max = np.round(max_w / self.dt).astype(int)
-        done, removed = 0, 0
+        pg = start if start is not None else SettleProgress.fresh(nw)
+        done, removed = int(pg.done), int(pg.removed)
+        ke_report = np.array(pg.ke_report, dtype=float)
+        paused, met = np.array(pg.paused, dtype=bool), np.array(pg.met, dtype=bool)
         worlds = self.model.host["body_world"]
-        ke_report = np.zeros(nw)
-        paused = np.zeros(nw, dtype=bool)
-        met = np.zeros(nw, dtype=bool)
         failed: dict[int, str] = {}
+        if paused.any():
+            self.pause_worlds(paused)
         try:
             while not paused.all():
                 k = int(min(chunk, n_max[~paused].max() - done))
@@ -634,6 +659,8 @@ class Simulation:
                 if stop.any():
                     paused |= stop
                     self.pause_worlds(paused)
+                if after_chunk is not None and not paused.all():
+                    after_chunk(SettleProgress(done, removed, ke_report.copy(), paused.copy(), met.copy()))
         finally:
             self.resume_worlds()
         return SettleReport(done * self.dt, bool(met.all()), ke_report, removed, failed)

@@ -11,7 +11,7 @@ import numpy as np
 
 import warpdem as wd
 from warpdem import ConfigError
-from warpdem.solver import SettleReport
+from warpdem.solver import SettleProgress, SettleReport
 
 from ..filling import FillResult, active_bodies, active_spheres, run_for
 from ..measurement import MeasurementError
@@ -161,8 +161,8 @@ class RunContext:
     def settle(self, name: str, max_time: float | np.ndarray, min_time: float | np.ndarray = 0.0,
                remove_box=None) -> SettleReport:
         """Spec "settled" criterion (KE per particle < ``ke_per_particle`` [J] after
-        ``min_time``, or ``max_time`` [s]; per world): :meth:`warpdem.Simulation.settle`'s loop
-        (same operations in the same order), with checkpoints between its chunks."""
+        ``min_time``, or ``max_time`` [s]; per world): :meth:`warpdem.Simulation.settle`, with a
+        checkpoint between its chunks and continued from a checkpoint's progress."""
         label = f"settle:{name}"
         how, saved = self._step(label)
         if how == "done":
@@ -170,49 +170,20 @@ class RunContext:
                                 saved["failed"])
         sim, exp = self.sim, self.exp
         nw = self.num_worlds
-        max_w = np.broadcast_to(np.asarray(max_time, dtype=float), (nw,))
-        min_w = np.broadcast_to(np.asarray(min_time, dtype=float), (nw,))
-        if np.any(max_w < 0) or np.any(min_w < 0):
-            raise ConfigError(f"settle: times must be >= 0, got min {min_time}, max {max_time}")
-        chunk = max(1, int(round(exp.settle_check_interval / sim.dt)))
-        n_max = np.round(max_w / sim.dt).astype(int)
-        worlds = self.model.host["body_world"]
+        start = None
         if how == "continue":
-            done, removed = int(saved["done"]), int(saved["removed"])
-            ke_report = np.asarray(saved["ke_report"], dtype=float)
-            paused, met = np.asarray(saved["paused"], dtype=bool), np.asarray(saved["met"], dtype=bool)
-        else:
-            done, removed = 0, 0
-            ke_report = np.zeros(nw)
-            paused, met = np.zeros(nw, dtype=bool), np.zeros(nw, dtype=bool)
-        failed: dict[int, str] = {}
+            start = SettleProgress(int(saved["done"]), int(saved["removed"]),
+                                   np.asarray(saved["ke_report"], dtype=float),
+                                   np.asarray(saved["paused"], dtype=bool), np.asarray(saved["met"], dtype=bool))
+
+        def save(pg: SettleProgress) -> None:
+            self._maybe_save(dict(label=label, done=pg.done, removed=pg.removed, ke_report=pg.ke_report,
+                                  paused=pg.paused, met=pg.met))
+
         with self._recording_vtk():
-            try:
-                while not paused.all():
-                    k = int(min(chunk, n_max[~paused].max() - done))
-                    if k > 0:
-                        sim.run(k, check_every=k)
-                        failed = sim.failed_worlds()
-                        done += k
-                        if remove_box is not None:
-                            removed += sim.remove_outside(*remove_box)
-                    bad = np.zeros(nw, dtype=bool)
-                    bad[list(failed)] = True
-                    active = np.bincount(worlds, weights=sim.state.body_active.numpy(), minlength=nw)
-                    ke = sim.kinetic_energy() / np.maximum(active, 1)
-                    ke_report[~paused] = ke[~paused]
-                    now_met = ~paused & ~bad & (done * sim.dt >= min_w - 1e-12) & (ke < exp.ke_per_particle)
-                    met |= now_met
-                    stop = now_met | (~paused & ((done >= n_max) | bad))
-                    if stop.any():
-                        paused |= stop
-                        sim.pause_worlds(paused)
-                    if not paused.all():
-                        self._maybe_save(dict(label=label, done=done, removed=removed, ke_report=ke_report,
-                                              paused=paused, met=met))
-            finally:
-                sim.resume_worlds()
-        rep = SettleReport(done * sim.dt, bool(met.all()), ke_report, removed, failed)
+            rep = sim.settle(exp.ke_per_particle, max_time, exp.settle_check_interval, min_time, remove_box,
+                             start=start, after_chunk=save)
+        ke_report, removed, failed = rep.ke_per_particle, rep.removed, rep.failed
         self._finish_step(label, dict(time=rep.time, settled=rep.settled, ke=ke_report, removed=removed,
                                       failed=failed))
         self._phase(name, rep.time)
