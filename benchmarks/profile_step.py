@@ -1,10 +1,13 @@
 """Where does a step's time go? Times each stage of DEMSolver.step on a settled bed.
 
     python benchmarks/profile_step.py --spheres 1000000 --device cuda [--order morton|lattice]
+        [--neighbour-search cell_list|hash_grid]
 
-Prints one JSON line: milliseconds per stage (wall placement, sphere placement, hash-grid
-build, contact kernel, integration) averaged over --repeats steps, plus the bytes a step
-must at least move per sphere and the effective bandwidth that implies.
+Prints one JSON line: milliseconds per stage (sphere placement, the neighbour search's build
+(``hash_grid_build`` or ``cell_list_build``), a full list rebuild (search + list kernel), the
+same launches on a step without a rebuild (``rebuild_skipped``), contact stages, full step)
+averaged over --repeats steps, plus the bytes a step must at least move per sphere and the
+effective bandwidth that implies.
 """
 from __future__ import annotations
 
@@ -16,6 +19,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
+from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, NEIGHBOUR_SEARCHES
 
 from settled_bed import build  # noqa: E402  (run from benchmarks/ or with it on sys.path)
 
@@ -55,44 +59,65 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=50)
     ap.add_argument("--rolling", default="epsd")
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
+    ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
+                    help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
-    sim = wd.Simulation(model, 5e-5, steps_per_graph=50)
+    sim = wd.Simulation(model, 5e-5, steps_per_graph=50, neighbour_search=args.neighbour_search)
     sim.run(int(args.settle_time / 5e-5), check_every=5000)
     s, m, so = sim.state, model, sim.solver
 
     def place():
         so.place_spheres(s)
 
+    always = wp.ones(1, dtype=int, device=device)  # a rebuild flag that stays set
+
     def grid():
-        so.grid.build(s.sphere_x, so.cell_size, groups=m.sphere_world)
+        """The neighbour search's own build (hash grid or cell list), as on a rebuild step."""
+        if so.cell_list is not None:
+            so.cell_list.build(s.sphere_x, m.sphere_world, m.sphere_body, s.body_active, always)
+        else:
+            so.grid.build(s.sphere_x, so.cell_size, groups=m.sphere_world)
+
+    def full_rebuild():
+        so.request_neighbour_rebuild()
+        so._build_neighbour_list(s)
+
+    def rebuild_skipped():
+        so._build_neighbour_list(s)  # the flag is 0 after a build: what a step without a rebuild launches
 
     def full_step():
         so.step(sim.state, sim._next)
 
-    stages = dict(place_spheres=timed(place, device, args.repeats), hash_grid_build=timed(grid, device, args.repeats),
-                  full_step=timed(full_step, device, args.repeats))
+    stages = {"place_spheres": timed(place, device, args.repeats),
+              f"{args.neighbour_search}_build": timed(grid, device, args.repeats),
+              "full_rebuild": timed(full_rebuild, device, args.repeats),
+              "rebuild_skipped": timed(rebuild_skipped, device, args.repeats),
+              "full_step": timed(full_step, device, args.repeats)}
     grid()
     stages["contact_stages"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5), device, args.repeats)
     stages["contact_stages_no_walls"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5, walls_on=False), device, args.repeats)
-    nb = wp.zeros(m.num_spheres, dtype=int, device=device)
-    stages["grid_query_only"] = timed(lambda: wp.launch(count_neighbours, dim=m.num_spheres, inputs=[
-        so.grid.id, s.sphere_x, m.sphere_radius, m.sphere_world, m.max_radius, nb], device=device), device, args.repeats)
+    if so.grid is not None:
+        nb = wp.zeros(m.num_spheres, dtype=int, device=device)
+        stages["grid_query_only"] = timed(lambda: wp.launch(count_neighbours, dim=m.num_spheres, inputs=[
+            so.grid.id, s.sphere_x, m.sphere_radius, m.sphere_world, m.max_radius, nb], device=device), device,
+            args.repeats)
     # the contact kernel alone: re-run it through a step minus the others is awkward, so
     # time a step with the grid already built by patching build to a no-op
-    orig = so.grid.build
-    so.grid.build = lambda *a, **k: None
+    search = so.cell_list if so.cell_list is not None else so.grid
+    search.build = lambda *a, **k: None
     stages["step_without_grid_build"] = timed(full_step, device, args.repeats)
-    so.grid.build = orig
+    del search.build  # the class's method again
     n = m.num_spheres
     k_avg = float(s.contact_count.numpy().mean())
     # minimum traffic per sphere-step: body state in/out (q, rot, v, w: 52 B each way), sphere x
     # (12 B w + r), contact slots in/out (count + per contact partner 4 B + spring 12 B + roll 12 B)
     bytes_per_sphere = 2 * 52 + 12 * 3 + 8 + 2 * (4 + k_avg * 28)
     ms = stages["full_step"]
-    out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order, contacts_per_sphere=round(k_avg, 3),
+    out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order,
+               neighbour_search=args.neighbour_search, contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))
     print(json.dumps(out), flush=True)

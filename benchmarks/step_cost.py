@@ -1,6 +1,7 @@
 """Where does a small model's step go? The experiments' regime: few spheres, many steps.
 
     python benchmarks/step_cost.py --device cuda [--spheres 2000 20000 200000] [--worlds 1]
+        [--neighbour-search cell_list|hash_grid]
 
 A drum-like case per size: spheres d = 16-20 mm in drums of 0.3 m (one drum per world, each
 rotating at its own speed, as the diagnosis' drum designs are), about 950 spheres per drum,
@@ -19,6 +20,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
+from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, NEIGHBOUR_SEARCHES
 
 PER_DRUM = 950  # a loose lattice holds ~950 in the drum's lower part (the paper fill settles to 1,648)
 DT = 8.2599588e-05
@@ -73,19 +75,22 @@ def main(argv=None):
     ap.add_argument("--device", default=None)
     ap.add_argument("--spheres", type=int, nargs="+", default=[2000, 20000, 200000])
     ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
+                    help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)
-        sim = wd.Simulation(model, DT, force=True)
+        sim = wd.Simulation(model, DT, force=True, neighbour_search=args.neighbour_search)
         sim.run(2000, check_every=2000)  # let the lattice collapse first
         graph_ms = per_step_ms(sim, args.steps, device)
         sim.use_graph = False
         plain_ms = per_step_ms(sim, max(50, args.steps // 10), device)
         kernels = kernel_breakdown(sim, 50) if wp.get_device(device).is_cuda else {}
         print(json.dumps(dict(case="drum-step-cost", device=wp.get_device(device).name, spheres=model.num_spheres,
-                              worlds=worlds, graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
+                              worlds=worlds, neighbour_search=args.neighbour_search,
+                              graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
                               sphere_steps_per_s=float(f"{model.num_spheres / (graph_ms * 1e-3):.3g}"),
                               list_builds=int(sim.solver.list_builds.numpy()[0]), kernels_ms_per_step=kernels,
                               date=time.strftime("%Y-%m-%d"))), flush=True)

@@ -445,6 +445,112 @@ def wall_overlap(
 
 
 # ----------------------------------------------------------------------------- neighbours
+# The list kernel's candidate test and row ending are shared, as ``wp.func``s, by the hash-grid
+# kernel below and the cell-list kernel (warpdem.stages.cell_list), so both searches produce
+# the same list from the same candidates.
+@wp.func
+def add_verlet_candidate(
+    j: int,
+    xi: wp.vec3,
+    ri: float,
+    body_i: int,
+    sphere_x: wp.array(dtype=wp.vec3),
+    sphere_radius: wp.array(dtype=float),
+    sphere_body: wp.array(dtype=int),
+    body_active: wp.array(dtype=int),
+    skin: float,
+    max_neighbours: int,
+    row_start: int,
+    n_kept: int,
+    n_dropped: int,
+    nb_index: wp.array(dtype=int),
+    overflow: wp.array(dtype=int),
+):
+    """Offer sphere ``j`` to the list row of a sphere at ``xi`` [m] of radius ``ri`` [m] and body
+    ``body_i`` (row ``nb_index[row_start : row_start + n_kept]``, sorted by index). ``j`` is
+    kept if it belongs to another, active body and its centre is closer than
+    r_i + r_j + ``skin`` [m]; it is inserted in index order (so the row does not depend on the
+    order candidates are offered, unless the row is full). A full row counts the drop in
+    ``overflow[0]``. Returns the row's new (kept, dropped) counts."""
+    bj = sphere_body[j]
+    if bj == body_i or body_active[bj] == 0:  # removed bodies stay where they left, out of play
+        return n_kept, n_dropped
+    d = xi - sphere_x[j]
+    reach = ri + sphere_radius[j] + skin
+    if wp.dot(d, d) >= reach * reach:
+        return n_kept, n_dropped
+    if n_kept >= max_neighbours:
+        # overflow[0]: entries dropped; overflow[1]: the largest list any sphere needed
+        wp.atomic_add(overflow, 0, 1)
+        return n_kept, n_dropped + 1
+    # insertion keeps the list sorted by index
+    k = n_kept
+    while k > 0 and nb_index[row_start + k - 1] > j:
+        nb_index[row_start + k] = nb_index[row_start + k - 1]
+        k -= 1
+    nb_index[row_start + k] = j
+    return n_kept + 1, n_dropped
+
+
+@wp.func
+def near_static_wall(
+    xi: wp.vec3,
+    ri: float,
+    skin: float,
+    world: int,
+    wall_mesh: wp.array(dtype=wp.uint64),
+    world_wall_start: wp.array(dtype=int),
+    world_wall_index: wp.array(dtype=int),
+    wall_moving: wp.array(dtype=int),
+):
+    """1 if a triangle of a static wall of ``world`` lies within the box xi +- (r_i + skin) [m]
+    (its BVH is then queried each step), else 0 (``world_wall_start/index``: the walls of
+    each world, CSR)."""
+    near = int(0)
+    ext = wp.vec3(ri + skin, ri + skin, ri + skin)
+    for kk in range(world_wall_start[world], world_wall_start[world + 1]):
+        k = world_wall_index[kk]
+        if wall_moving[k] != 0:
+            continue
+        mq = wp.mesh_query_aabb(wall_mesh[k], xi - ext, xi + ext)
+        tri = int(0)
+        if wp.mesh_query_aabb_next(mq, tri):
+            near = 1
+    return near
+
+
+@wp.func
+def finish_verlet_row(
+    i: int,
+    xi: wp.vec3,
+    ri: float,
+    active: int,
+    world: int,
+    skin: float,
+    n_kept: int,
+    n_dropped: int,
+    wall_mesh: wp.array(dtype=wp.uint64),
+    world_wall_start: wp.array(dtype=int),
+    world_wall_index: wp.array(dtype=int),
+    wall_moving: wp.array(dtype=int),
+    nb_count: wp.array(dtype=int),
+    near_wall: wp.array(dtype=int),
+    x_at_build: wp.array(dtype=wp.vec3),
+    overflow: wp.array(dtype=int),
+):
+    """Close sphere ``i``'s row: its length, the largest length needed (``overflow[1]``, if
+    entries were dropped), whether a static wall is near (0 for an inactive sphere) and the
+    position [m] the row was built at."""
+    x_at_build[i] = xi
+    nb_count[i] = n_kept
+    if n_dropped > 0:
+        wp.atomic_max(overflow, 1, n_kept + n_dropped)
+    near = int(0)
+    if active != 0:
+        near = near_static_wall(xi, ri, skin, world, wall_mesh, world_wall_start, world_wall_index, wall_moving)
+    near_wall[i] = near
+
+
 @wp.kernel
 def build_neighbour_list(
     grid: wp.uint64,
@@ -467,59 +573,30 @@ def build_neighbour_list(
     overflow: wp.array(dtype=int),
     rebuild: wp.array(dtype=int),
 ):
-    """Verlet list: spheres of the same world and another body within r_i + r_j + skin,
-    sorted by index; and whether a static wall of its world lies within r_i + skin (its BVH
-    is then queried each step; ``world_wall_start/index``: the walls of each world, CSR). Valid while no sphere moves more than skin / 2. Does nothing unless
-    ``rebuild[0]`` is set, so the launch can sit unconditionally in a CUDA graph."""
+    """Verlet list from Warp's hash grid (grouped by world): spheres of the same world and
+    another body within r_i + r_j + skin, sorted by index (:func:`add_verlet_candidate`); and
+    whether a static wall of its world lies within r_i + skin (:func:`near_static_wall`).
+    Valid while no sphere moves more than skin / 2. Does nothing unless ``rebuild[0]`` is set,
+    so the launch can sit unconditionally in a CUDA graph. The cell-list search
+    (:mod:`warpdem.stages.cell_list`) builds the same list without the hash grid."""
     if rebuild[0] == 0:
         return
     i = wp.tid()
     xi = sphere_x[i]
-    x_at_build[i] = xi
     ri = sphere_radius[i]
     b = sphere_body[i]
+    active = body_active[b]
     base = i * max_neighbours
     n = int(0)
-    n_all = int(0)
-    if body_active[b] != 0:
+    n_dropped = int(0)
+    if active != 0:
         q = wp.hash_grid_query(grid, xi, ri + max_radius + skin, sphere_world[i])
         j = int(0)
         while wp.hash_grid_query_next(q, j):
-            bj = sphere_body[j]
-            if bj == b or body_active[bj] == 0:  # removed bodies stay where they left, out of play
-                continue
-            d = xi - sphere_x[j]
-            reach = ri + sphere_radius[j] + skin
-            if wp.dot(d, d) >= reach * reach:
-                continue
-            if n >= max_neighbours:
-                # overflow[0]: entries dropped; overflow[1]: the largest list any sphere needed
-                wp.atomic_add(overflow, 0, 1)
-                n_all += 1
-                continue
-            # insertion keeps the list sorted by index
-            k = n
-            while k > 0 and nb_index[base + k - 1] > j:
-                nb_index[base + k] = nb_index[base + k - 1]
-                k -= 1
-            nb_index[base + k] = j
-            n += 1
-    nb_count[i] = n
-    if n_all > 0:
-        wp.atomic_max(overflow, 1, n + n_all)
-    near = int(0)
-    if body_active[b] != 0:
-        ext = wp.vec3(ri + skin, ri + skin, ri + skin)
-        wi = sphere_world[i]
-        for kk in range(world_wall_start[wi], world_wall_start[wi + 1]):
-            k = world_wall_index[kk]
-            if wall_moving[k] != 0:
-                continue
-            mq = wp.mesh_query_aabb(wall_mesh[k], xi - ext, xi + ext)
-            tri = int(0)
-            if wp.mesh_query_aabb_next(mq, tri):
-                near = 1
-    near_wall[i] = near
+            n, n_dropped = add_verlet_candidate(j, xi, ri, b, sphere_x, sphere_radius, sphere_body, body_active,
+                                                skin, max_neighbours, base, n, n_dropped, nb_index, overflow)
+    finish_verlet_row(i, xi, ri, active, sphere_world[i], skin, n, n_dropped, wall_mesh, world_wall_start,
+                      world_wall_index, wall_moving, nb_count, near_wall, x_at_build, overflow)
 
 
 @wp.kernel

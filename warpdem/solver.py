@@ -11,9 +11,13 @@ import warp as wp
 from . import kernels, stages
 from .errors import ConfigError, ContactOverflowError, StabilityError, StabilityWarning
 from .model import Model, State
+from .stages.cell_list import CellList, build_neighbour_list_from_cells
 from .timestep import TimeStepLimits, check_time_step, speed_bound
 
 UNSTABLE_MODES = ("raise", "freeze")
+# how the Verlet list finds its candidates (DEMSolver's neighbour_search)
+NEIGHBOUR_SEARCHES = ("cell_list", "hash_grid")
+DEFAULT_NEIGHBOUR_SEARCH = "cell_list"
 
 
 class WallStats:
@@ -62,7 +66,8 @@ class DEMSolver:
     """Explicit DEM solver for a :class:`Model`.
 
     Each step: place member spheres from body poses (walls move rigidly and are looked up in
-    their rest frame, so no wall mesh is moved or refitted); rebuild the grouped hash grid (one group per world); evaluate contacts (one
+    their rest frame, so no wall mesh is moved or refitted); rebuild the Verlet neighbour list
+    if a sphere moved more than skin / 2 (decided on the device); evaluate contacts (one
     thread per sphere, full neighbour list with per-sphere history slots); integrate bodies
     (semi-implicit Euler); isolate unstable worlds; advance time. Nothing is copied to the
     host inside a step.
@@ -86,15 +91,24 @@ class DEMSolver:
         max_neighbours: list capacity per sphere (default 3 * max_contacts for free spheres of
             similar size, 6 x with r_max > 2 r_min, 8 x with clumps); overflow is an error that names
             the capacity needed.
-        conditional_rebuild: put the hash-grid build and list kernel behind a conditional graph
-            node (``wp.capture_if``) so steps without a rebuild skip the grid build too.
+        conditional_rebuild: put the neighbour search and list kernel behind a conditional graph
+            node (``wp.capture_if``) so steps without a rebuild skip them (fails to instantiate
+            with ``neighbour_search="hash_grid"`` on Warp 1.19: HashGrid.build allocates).
+        neighbour_search: how the list finds candidates: ``"cell_list"`` (default;
+            :class:`~warpdem.stages.cell_list.CellList`, plain kernel launches that return at
+            once on steps without a rebuild) or ``"hash_grid"`` (Warp's ``wp.HashGrid``, rebuilt
+            every step). Both give the same list, entry for entry.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  neighbour_skin: float | None = None, max_neighbours: int | None = None,
-                 conditional_rebuild: bool = False, v_max: float | None = None) -> None:
+                 conditional_rebuild: bool = False, v_max: float | None = None,
+                 neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH) -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
+        if neighbour_search not in NEIGHBOUR_SEARCHES:
+            raise ConfigError(f"neighbour_search must be one of {NEIGHBOUR_SEARCHES}, got {neighbour_search!r}")
+        self.neighbour_search = neighbour_search
         self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
         self.dt = float(dt)
         self.v_ref = float(v_ref)
@@ -121,8 +135,6 @@ class DEMSolver:
         self.external_force = wp.zeros(model.num_bodies, dtype=wp.vec3, device=d)
         self.use_external_force = False
         self.wall_stats = WallStats(model)
-        dim = int(min(256, max(16, round((2.0 * n) ** (1.0 / 3.0)))))
-        self.grid = wp.HashGrid(dim, dim, dim, device=d)
         self.skin = 0.3 * model.max_radius if neighbour_skin is None else float(neighbour_skin)
         if not self.skin > 0:
             raise ConfigError(f"neighbour_skin must be > 0 m, got {neighbour_skin}")
@@ -134,7 +146,15 @@ class DEMSolver:
             wide = model.max_radius > 2.0 * model.min_radius
             max_neighbours = (8 if clumps else 6 if wide else 3) * model.max_contacts
         self.max_neighbours = int(max_neighbours)
+        # side of a search cell [m]: every neighbour within r_i + r_j + skin lies in the 27 cells around
         self.cell_size = 2.0 * model.max_radius + self.skin
+        self.grid: wp.HashGrid | None = None
+        self.cell_list: CellList | None = None
+        if neighbour_search == "hash_grid":
+            dim = int(min(256, max(16, round((2.0 * n) ** (1.0 / 3.0)))))
+            self.grid = wp.HashGrid(dim, dim, dim, device=d)
+        else:
+            self.cell_list = CellList(n, self.cell_size, d)
         self.views = wp.zeros(n, dtype=kernels.SphereView, device=d)
         self.nb_count = wp.zeros(n, dtype=int, device=d)
         self.nb_index = wp.zeros(n * self.max_neighbours, dtype=int, device=d)
@@ -237,16 +257,24 @@ class DEMSolver:
     def _build_neighbour_list(self, state: State) -> None:
         """Rebuild the Verlet list if ``self.rebuild`` is set (decided on the device).
 
-        The hash grid is rebuilt every step (cheap); the list kernel returns at once unless a
-        sphere moved more than skin / 2. (A conditional CUDA-graph node around both would
-        also skip the grid, but HashGrid.build does not instantiate inside one.)"""
+        ``neighbour_search="cell_list"``: the cell list's launches and the list kernel all return
+        at once unless a sphere moved more than skin / 2, so a step without a rebuild costs a
+        few empty launches. ``"hash_grid"``: Warp's hash grid is rebuilt every step (it
+        allocates and sorts with CUB, so it cannot sit in a conditional CUDA-graph node); the
+        list kernel returns at once unless a rebuild is due."""
         m = self.model
-        self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
-        wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[
-            self.grid.id, state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active,
-            m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.world_wall_start, m.world_wall_index, self.wall_moving,
-            self.nb_count, self.nb_index, self.near_wall, self.x_at_build, self.nb_overflow, self.rebuild],
-            device=m.device)
+        search_inputs = [state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active,
+                         m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.world_wall_start,
+                         m.world_wall_index, self.wall_moving, self.nb_count, self.nb_index, self.near_wall,
+                         self.x_at_build, self.nb_overflow, self.rebuild]
+        if self.cell_list is not None:
+            self.cell_list.build(state.sphere_x, m.sphere_world, m.sphere_body, state.body_active, self.rebuild)
+            wp.launch(build_neighbour_list_from_cells, dim=m.num_spheres, inputs=[self.cell_list.table, *search_inputs],
+                      device=m.device)
+        else:
+            self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
+            wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[self.grid.id, *search_inputs],
+                      device=m.device)
         wp.launch(kernels.finish_build, dim=1, inputs=[self.rebuild, self.list_builds], device=m.device)
 
     def pause_worlds(self, state: State, worlds) -> None:
@@ -466,20 +494,22 @@ class Simulation:
     """Owns two States and a solver; runs many steps with periodic checks.
 
     On CUDA the inner loop is captured once in a CUDA graph (``steps_per_graph`` steps,
-    even so that the state parity is preserved) and replayed.
+    even so that the state parity is preserved) and replayed. The solver options
+    (``neighbour_skin``, ``max_neighbours``, ``conditional_rebuild``, ``v_max``,
+    ``neighbour_search``) are passed to :class:`DEMSolver`.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  use_graph: bool | None = None, steps_per_graph: int = 20, neighbour_skin: float | None = None,
                  max_neighbours: int | None = None, conditional_rebuild: bool = False,
-                 v_max: float | None = None) -> None:
+                 v_max: float | None = None, neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH) -> None:
         self.model = model
         # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
         # "freeze" (the world stays frozen and is listed, the others run on)
         self.on_unstable = "raise"
         self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
                                 max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild,
-                                v_max=v_max)
+                                v_max=v_max, neighbour_search=neighbour_search)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0
