@@ -197,7 +197,7 @@ def test_report_lists_the_waves(looped, tmp_path):
 
 
 def test_settings_validate_max_refine_waves():
-    assert DiagnosisSettings().max_refine_waves == 3
+    assert DiagnosisSettings().max_refine_waves == 5
     for bad in (-1, 1.5, True, "2"):
         with pytest.raises(ValueError, match="max_refine_waves must be an integer >= 0"):
             DiagnosisSettings(max_refine_waves=bad)
@@ -235,3 +235,19 @@ def test_max_refine_waves_is_read_from_the_config_and_checked(tmp_path):
     (tmp_path / "d.yaml").write_text(yaml.safe_dump(doc))
     with pytest.raises(ConfigError, match="max_refine_waves"):
         load_diagnosis_config(tmp_path / "d.yaml")
+
+
+def test_waves_stop_when_a_wave_stalls_before_the_limit():
+    """A drifting model: the second wave's disagreement is no smaller than the first's, so no
+    third wave runs although max_refine_waves allows five; the wave is marked stalled."""
+    r = run(5, DriftingModel())
+    waves = r.final.refinement
+    assert len(waves) == 2 and r.final.waves == 3
+    assert waves[-1].check.max_disagreement > 0.9 * waves[0].check.max_disagreement
+    assert [w.stalled for w in waves] == [False, True]
+    assert r.to_dict()["versions"][-1]["refinement"][-1]["stalled"] is True
+    assert not r.met
+
+
+def test_a_falling_disagreement_is_not_a_stall(looped):
+    assert not any(w.stalled for w in looped.final.refinement)

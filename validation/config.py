@@ -65,7 +65,7 @@ class DiagnosisSection(_Strict):
     replicates: int = Field(2, ge=2)
     confirm_replicates: int = Field(3, ge=1)
     refine_points: int = Field(8, ge=0)
-    max_refine_waves: int = Field(3, ge=0)
+    max_refine_waves: int = Field(5, ge=0)
     scan_points: int = Field(2 ** 14, ge=64)
     evidence_samples: int = Field(2 ** 13, ge=256)
     cutoff: float = Field(3.0, gt=0)

@@ -14,6 +14,7 @@ import numpy as np
 from calibration.reporting import Cell, Figure, Report, Section, Table, Verdict
 
 from .evidence import bayes_factor_words
+from .study import STALL_FRACTION
 
 if TYPE_CHECKING:  # pragma: no cover
     from .diagnose import DiagnosisResult
@@ -25,12 +26,14 @@ def _refinement_blocks(result, within: float, cutoff: float) -> list:
     """A table of the history-matching waves of every model version that had any (none: nothing)."""
     rows = [[v.name, r.wave, r.new_sets, r.confirmation_sets, r.design_sets,
              Cell(round(r.check.max_disagreement, 1), "good" if r.check.agrees else "bad"),
-             ", ".join(r.check.disagreeing) or "none", _z_cell(r.check.max_abs_z_dem, within, cutoff)]
+             ", ".join(r.check.disagreeing) + (" (stalled)" if r.stalled else "") or "none", _z_cell(r.check.max_abs_z_dem, within, cutoff)]
             for v in result.versions for r in v.refinement]
     if not rows:
         return []
     return ["Refinement waves: each adds sets in the non-implausible region and the DEM runs at earlier best "
-            "fits, refits and re-confirms, until the DEM at the best fit agrees with the surrogate there "
+            "fits, refits and re-confirms, until the DEM at the best fit agrees with the surrogate there, "
+            "or a wave stalls (its largest disagreement fell by less than "
+            f"{100 * STALL_FRACTION:.0f} % of the previous wave's; marked 'stalled') "
             f"(max_refine_waves = {result.settings.max_refine_waves}).",
             Table(["model version", "wave", "new sets", "confirmation sets joined", "design sets",
                    "largest DEM − surrogate (combined sd)", "surrogate contradicted on", "largest |z| (DEM)"], rows,

@@ -53,7 +53,7 @@ class DiagnosisSettings:
     replicates: int = 2
     confirm_replicates: int = 3
     refine_points: int = 8
-    max_refine_waves: int = 3
+    max_refine_waves: int = 5
     scan_points: int = 2 ** 14
     evidence_samples: int = 2 ** 13
     cutoff: float = 3.0

@@ -39,6 +39,11 @@ from .search import BestFit, SurrogateScan, find_best_fit, scan_box
 from .settings import DiagnosisSettings
 from .surrogates import SurrogateSet, fit_surrogates
 
+# a refinement wave "stalls" when the largest DEM-vs-surrogate disagreement at the best fit fell by
+# less than this fraction of the previous wave's (a judgement: 10 % is within the wave-to-wave
+# scatter of a two-fill confirmation, so smaller gains do not justify another design wave)
+STALL_FRACTION = 0.10
+
 __all__ = ["Confirmation", "SurrogateCheck", "RefinementWave", "ModelStudy", "study_model", "refine_study",
            "confirm", "check_surrogate"]
 
@@ -158,6 +163,8 @@ class RefinementWave:
     new_sets : maximin sets placed in the non-implausible region.
     confirmation_sets : earlier DEM confirmations (runs at earlier best fits) that joined the design.
     design_sets : parameter sets in the design after the wave.
+    stalled : its largest disagreement fell by less than ``STALL_FRACTION`` of the previous wave's
+        (no further wave was run).
     """
 
     wave: int
@@ -166,11 +173,12 @@ class RefinementWave:
     design_sets: int
     best_parameters: dict[str, float]
     check: SurrogateCheck
+    stalled: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {"wave": self.wave, "new_sets": self.new_sets, "confirmation_sets": self.confirmation_sets,
                 "design_sets": self.design_sets, "best_parameters": self.best_parameters,
-                "agrees": self.check.agrees, "disagreeing": list(self.check.disagreeing),
+                "stalled": self.stalled, "agrees": self.check.agrees, "disagreeing": list(self.check.disagreeing),
                 "max_disagreement": self.check.max_disagreement, "max_abs_z_dem": self.check.max_abs_z_dem}
 
 
@@ -300,7 +308,9 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
     its lowest-implausibility 2 % if that is too small), joins the DEM confirmations of earlier
     best fits that are not in the design yet, and redoes the whole study on the joined design
     (refit, re-optimise, re-confirm).  The loop stops when the new study's :class:`SurrogateCheck`
-    agrees, or the DEM already puts every observable within ``within_sigma``, or after the limit.
+    agrees, or the DEM already puts every observable within ``within_sigma``, or a wave has stalled
+    (its largest DEM-vs-surrogate disagreement fell by less than ``STALL_FRACTION`` of the previous
+    wave's: more DEM in the same region is not paying), or after the limit.
 
     first_wave_unconditional : True (the recalibration of a chosen effect): the first wave always
         runs, without the confirmation (it is the single wave of the diagnosis before this loop),
@@ -317,9 +327,10 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
     version = study.version
     limit = max(1, settings.max_refine_waves) if first_wave_unconditional else max(0, settings.max_refine_waves - 1)
     current, pending, records = study, [study.confirmation], []
+    stalled = False
     for k in range(limit):
         unconditional = first_wave_unconditional and k == 0
-        if not unconditional and (current.check.agrees or current.check.dem_within):
+        if not unconditional and (current.check.agrees or current.check.dem_within or stalled):
             break
         design = current.design
         joined = [] if unconditional else pending
@@ -334,13 +345,18 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
         refined = study_model(version, observations, runner, settings, seed + 7919 * k, design.extended(new),
                               waves=current.waves + 1, noise=noise)
         pending = (pending if unconditional else []) + [refined.confirmation]
+        stalled = (not unconditional and current.check is not None and refined.check is not None
+                   and not (refined.check.agrees or refined.check.dem_within)
+                   and refined.check.max_disagreement > (1.0 - STALL_FRACTION) * current.check.max_disagreement)
         records.append(RefinementWave(refined.waves, len(U_new), len(joined), len(refined.design.X),
-                                      refined.best_parameters, refined.check))
+                                      refined.best_parameters, refined.check, stalled))
         current = refined
         if say is not None:
             c = refined.check
             state = ("agrees" if c.agrees else "DEM within every measurement" if c.dem_within
-                     else "disagrees" + ("" if k + 1 < limit else ": wave limit (max_refine_waves) reached"))
+                     else "disagrees" + (": wave limit (max_refine_waves) reached" if k + 1 >= limit
+                                         else ": stalled (disagreement fell by < "
+                                              f"{100 * STALL_FRACTION:.0f} %), no further wave" if stalled else ""))
             say(f"{version.name}: wave {refined.waves}: +{len(U_new)} sets, +{len(joined)} confirmation set(s), "
                 f"{len(refined.design.X)} in all; DEM vs surrogate at the best fit: largest disagreement "
                 f"{c.max_disagreement:.1f} sd{' (' + ', '.join(c.disagreeing) + ')' if c.disagreeing else ''}, "
