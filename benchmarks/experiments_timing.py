@@ -41,9 +41,8 @@ MATERIALS = {
 }
 
 
-def parameter_sets(rolling: str, worlds: int, seed: int = 0) -> list[dict[str, float]]:
-    """Per-world contact parameters around the law's defaults (names from the law)."""
-    law = wd.ContactLaw(rolling=rolling)
+def parameter_sets(law: wd.ContactLaw, worlds: int, seed: int = 0) -> list[dict[str, float]]:
+    """Per-world contact parameters around the law's defaults (names from the experiment's law)."""
     rng = np.random.default_rng(seed)
     specs = law.specs
     sets = []
@@ -84,7 +83,7 @@ def main(argv=None) -> list[dict]:
         for worlds in args.worlds:
             exp = make_experiment(name, args.scale, **extra)
             t0 = time.perf_counter()
-            res = exp.run(parameter_sets(exp.rolling, worlds, args.seed), device=device, progress=args.progress)
+            res = exp.run(parameter_sets(exp.contact_law, worlds, args.seed), device=device, progress=args.progress)
             wall = time.perf_counter() - t0
             t = res[0].timing
             angles = np.array([r.angle_deg for r in res if r.ok], dtype=float)

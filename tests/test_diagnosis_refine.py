@@ -176,7 +176,7 @@ def _without_seconds(x):
 def test_waves_stop_at_the_limit_and_the_verdict_says_the_surrogate_still_disagrees():
     r = run(2, DriftingModel())
     waves = r.final.refinement
-    assert len(waves) == 2 and r.final.waves == 3
+    assert len(waves) == 2 and [w.wave for w in waves] == [2, 3]
     assert all(not w.check.agrees and "t/three" in w.check.disagreeing for w in waves)
     assert not r.met
     assert ("the surrogate still disagrees with the DEM at that best fit for t/three after 2 refinement waves"
@@ -242,7 +242,7 @@ def test_waves_stop_when_a_wave_stalls_before_the_limit():
     third wave runs although max_refine_waves allows five; the wave is marked stalled."""
     r = run(5, DriftingModel())
     waves = r.final.refinement
-    assert len(waves) == 2 and r.final.waves == 3
+    assert len(waves) == 2 and [w.wave for w in waves] == [2, 3]
     assert waves[-1].check.max_disagreement > 0.9 * waves[0].check.max_disagreement
     assert [w.stalled for w in waves] == [False, True]
     assert r.to_dict()["versions"][-1]["refinement"][-1]["stalled"] is True
@@ -251,3 +251,18 @@ def test_waves_stop_when_a_wave_stalls_before_the_limit():
 
 def test_a_falling_disagreement_is_not_a_stall(looped):
     assert not any(w.stalled for w in looped.final.refinement)
+
+
+def test_the_wave_with_the_best_dem_confirmation_is_kept():
+    """Drifting model: every wave's DEM lands further off, so the first wave's fit (the smallest
+    largest |z| of the DEM confirmations) is returned, and marked kept."""
+    r = run(5, DriftingModel())
+    waves = r.final.refinement
+    zs = [w.check.max_abs_z_dem for w in waves]
+    kept = [w.kept for w in waves]
+    assert kept.count(True) == 1 and zs[kept.index(True)] == min(zs)
+    assert r.final.check.max_abs_z_dem == min(zs) and r.final.waves == waves[kept.index(True)].wave
+
+
+def test_an_agreeing_last_wave_is_kept(looped):
+    assert looped.final.refinement[-1].kept and looped.final.check.agrees

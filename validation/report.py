@@ -24,7 +24,7 @@ __all__ = ["build_report"]
 
 def _refinement_blocks(result, within: float, cutoff: float) -> list:
     """A table of the history-matching waves of every model version that had any (none: nothing)."""
-    rows = [[v.name, r.wave, r.new_sets, r.confirmation_sets, r.design_sets,
+    rows = [[v.name, f"{r.wave} (kept)" if r.kept and len(v.refinement) > 1 else r.wave, r.new_sets, r.confirmation_sets, r.design_sets,
              Cell(round(r.check.max_disagreement, 1), "good" if r.check.agrees else "bad"),
              ", ".join(r.check.disagreeing) + (" (stalled)" if r.stalled else "") or "none", _z_cell(r.check.max_abs_z_dem, within, cutoff)]
             for v in result.versions for r in v.refinement]
@@ -33,7 +33,8 @@ def _refinement_blocks(result, within: float, cutoff: float) -> list:
     return ["Refinement waves: each adds sets in the non-implausible region and the DEM runs at earlier best "
             "fits, refits and re-confirms, until the DEM at the best fit agrees with the surrogate there, "
             "or a wave stalls (its largest disagreement fell by less than "
-            f"{100 * STALL_FRACTION:.0f} % of the previous wave's; marked 'stalled') "
+            f"{100 * STALL_FRACTION:.0f} % of the previous wave's; marked 'stalled'); if the last wave's DEM "
+            "still disagrees, the wave whose DEM confirmation fits best is kept (marked 'kept') "
             f"(max_refine_waves = {result.settings.max_refine_waves}).",
             Table(["model version", "wave", "new sets", "confirmation sets joined", "design sets",
                    "largest DEM − surrogate (combined sd)", "surrogate contradicted on", "largest |z| (DEM)"], rows,

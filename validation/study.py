@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -165,6 +165,7 @@ class RefinementWave:
     design_sets : parameter sets in the design after the wave.
     stalled : its largest disagreement fell by less than ``STALL_FRACTION`` of the previous wave's
         (no further wave was run).
+    kept : this wave's study is the one returned (see :func:`refine_study`).
     """
 
     wave: int
@@ -174,11 +175,12 @@ class RefinementWave:
     best_parameters: dict[str, float]
     check: SurrogateCheck
     stalled: bool = False
+    kept: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {"wave": self.wave, "new_sets": self.new_sets, "confirmation_sets": self.confirmation_sets,
                 "design_sets": self.design_sets, "best_parameters": self.best_parameters,
-                "stalled": self.stalled, "agrees": self.check.agrees, "disagreeing": list(self.check.disagreeing),
+                "stalled": self.stalled, "kept": self.kept, "agrees": self.check.agrees, "disagreeing": list(self.check.disagreeing),
                 "max_disagreement": self.check.max_disagreement, "max_abs_z_dem": self.check.max_abs_z_dem}
 
 
@@ -318,7 +320,11 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
         is only doubted: the adequate base model): waves run only while the check disagrees, at
         most ``max_refine_waves - 1`` of them, so 0 and 1 add none in either case.
     say : progress callback, one line per wave.
-    Returns the last study, with ``refinement`` recording every wave; ``refine_points = 0``: ``study``.
+    Returns the last study if its DEM agrees with its surrogate or lies within every measurement;
+    otherwise the wave whose DEM confirmation has the smallest largest |z| (a later wave can land on
+    a worse best fit; every confirmation is a real DEM run, so the best confirmed fit is kept, ties
+    to the later wave), with ``refinement`` recording every wave (the kept one marked);
+    ``refine_points = 0``: ``study``.
     """
     if settings.refine_points == 0:
         return study
@@ -328,6 +334,7 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
     limit = max(1, settings.max_refine_waves) if first_wave_unconditional else max(0, settings.max_refine_waves - 1)
     current, pending, records = study, [study.confirmation], []
     stalled = False
+    studies: list[ModelStudy] = []
     for k in range(limit):
         unconditional = first_wave_unconditional and k == 0
         if not unconditional and (current.check.agrees or current.check.dem_within or stalled):
@@ -351,6 +358,7 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
         records.append(RefinementWave(refined.waves, len(U_new), len(joined), len(refined.design.X),
                                       refined.best_parameters, refined.check, stalled))
         current = refined
+        studies.append(refined)
         if say is not None:
             c = refined.check
             state = ("agrees" if c.agrees else "DEM within every measurement" if c.dem_within
@@ -363,6 +371,14 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
                 f"largest |z| DEM {c.max_abs_z_dem:.1f}: {state}")
     if current is study:
         return study
-    current.refinement = study.refinement + tuple(records)
-    current.seconds = study.seconds + (time.perf_counter() - t0)
-    return current
+    kept = current
+    if not (current.check.agrees or current.check.dem_within):
+        candidates = studies if first_wave_unconditional else [study] + studies
+        kept = min(reversed(candidates), key=lambda s: s.check.max_abs_z_dem)
+        if say is not None and kept is not current:
+            say(f"{version.name}: keeping wave {kept.waves}'s best fit (its DEM confirmation has the smallest "
+                f"largest |z|, {kept.check.max_abs_z_dem:.1f}, against {current.check.max_abs_z_dem:.1f} at the last wave)")
+    records = [replace(r, kept=(r.wave == kept.waves)) for r in records]
+    kept.refinement = study.refinement + tuple(records)
+    kept.seconds = study.seconds + (time.perf_counter() - t0)
+    return kept
