@@ -1,13 +1,15 @@
 """Where does a step's time go? Times each stage of DEMSolver.step on a settled bed.
 
     python benchmarks/profile_step.py --spheres 1000000 --device cuda [--order morton|lattice]
-        [--neighbour-search cell_list|hash_grid]
+        [--neighbour-search cell_list|hash_grid] [--wall-stage split|fused]
 
 Prints one JSON line: milliseconds per stage (sphere placement, the neighbour search's build
 (``hash_grid_build`` or ``cell_list_build``), a full list rebuild (search + list kernel), the
 same launches on a step without a rebuild (``rebuild_skipped``), contact stages, full step)
 averaged over --repeats steps, plus the bytes a step must at least move per sphere and the
-effective bandwidth that implies.
+effective bandwidth that implies. On CUDA also ``kernels_ms_per_step``: milliseconds per step
+of each kernel over --repeats ungraphed steps (Warp's CUDA activity timing, summed per kernel
+name, as in step_cost.py); left out on the CPU, where that timing is not available.
 """
 from __future__ import annotations
 
@@ -19,9 +21,10 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, NEIGHBOUR_SEARCHES
+from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, WALL_STAGES
 
 from settled_bed import build  # noqa: E402  (run from benchmarks/ or with it on sys.path)
+from step_cost import kernel_breakdown  # noqa: E402
 
 
 @wp.kernel
@@ -61,11 +64,14 @@ def main(argv=None):
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
     ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
+    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
+                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
-    sim = wd.Simulation(model, 5e-5, steps_per_graph=50, neighbour_search=args.neighbour_search)
+    sim = wd.Simulation(model, 5e-5, steps_per_graph=50, neighbour_search=args.neighbour_search,
+                        wall_stage=args.wall_stage)
     sim.run(int(args.settle_time / 5e-5), check_every=5000)
     s, m, so = sim.state, model, sim.solver
 
@@ -117,9 +123,11 @@ def main(argv=None):
     bytes_per_sphere = 2 * 52 + 12 * 3 + 8 + 2 * (4 + k_avg * 28)
     ms = stages["full_step"]
     out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order,
-               neighbour_search=args.neighbour_search, contacts_per_sphere=round(k_avg, 3),
+               neighbour_search=args.neighbour_search, wall_stage=args.wall_stage, contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))
+    if wp.get_device(device).is_cuda:  # CUDA activity timing; advances the simulation (last)
+        out["kernels_ms_per_step"] = kernel_breakdown(sim, args.repeats)
     print(json.dumps(out), flush=True)
 
 

@@ -1,7 +1,7 @@
 """Where does a small model's step go? The experiments' regime: few spheres, many steps.
 
     python benchmarks/step_cost.py --device cuda [--spheres 2000 20000 200000] [--worlds 1]
-        [--neighbour-search cell_list|hash_grid]
+        [--neighbour-search cell_list|hash_grid] [--wall-stage split|fused]
 
 A drum-like case per size: spheres d = 16-20 mm in drums of 0.3 m (one drum per world, each
 rotating at its own speed, as the diagnosis' drum designs are), about 950 spheres per drum,
@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, NEIGHBOUR_SEARCHES
+from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, WALL_STAGES
 
 PER_DRUM = 950  # a loose lattice holds ~950 in the drum's lower part (the paper fill settles to 1,648)
 DT = 8.2599588e-05
@@ -59,6 +59,8 @@ def per_step_ms(sim: wd.Simulation, steps: int, device: str) -> float:
 
 
 def kernel_breakdown(sim: wd.Simulation, steps: int) -> dict[str, float]:
+    """Milliseconds per step of each kernel (and memcpy/memset) over ``steps`` ungraphed steps
+    (Warp's CUDA activity timing, summed per name; largest first). CUDA only."""
     wp.timing_begin(cuda_filter=wp.TIMING_ALL)
     for _ in range(steps):
         sim.solver.step(sim.state, sim._next)
@@ -77,19 +79,22 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
+    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
+                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)
-        sim = wd.Simulation(model, DT, force=True, neighbour_search=args.neighbour_search)
+        sim = wd.Simulation(model, DT, force=True, neighbour_search=args.neighbour_search,
+                            wall_stage=args.wall_stage)
         sim.run(2000, check_every=2000)  # let the lattice collapse first
         graph_ms = per_step_ms(sim, args.steps, device)
         sim.use_graph = False
         plain_ms = per_step_ms(sim, max(50, args.steps // 10), device)
         kernels = kernel_breakdown(sim, 50) if wp.get_device(device).is_cuda else {}
         print(json.dumps(dict(case="drum-step-cost", device=wp.get_device(device).name, spheres=model.num_spheres,
-                              worlds=worlds, neighbour_search=args.neighbour_search,
+                              worlds=worlds, neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
                               graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
                               sphere_steps_per_s=float(f"{model.num_spheres / (graph_ms * 1e-3):.3g}"),
                               list_builds=int(sim.solver.list_builds.numpy()[0]), kernels_ms_per_step=kernels,

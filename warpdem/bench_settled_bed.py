@@ -9,6 +9,7 @@ larger N, or W worlds of N each). Pour from a loose lattice, settle until KE per
     python benchmarks/settled_bed.py --spheres 1000000 --device cuda
     python benchmarks/settled_bed.py --spheres 20000 --worlds 50 --device cuda
     python benchmarks/settled_bed.py --spheres 1000000 --device cuda --neighbour-search hash_grid
+    python benchmarks/settled_bed.py --spheres 1000000 --device cuda --wall-stage fused
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
-from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, NEIGHBOUR_SEARCHES
+from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, WALL_STAGES
 
 D = 0.018
 R = D / 2
@@ -102,13 +103,16 @@ def main(argv=None) -> dict:
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"], help="memory order of the spheres")
     ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
+    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
+                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     t0 = time.perf_counter()
     model, width = build(args.spheres, args.worlds, args.rolling, device, args.max_contacts, args.order)
     sim = wd.Simulation(model, 5.0e-5, use_graph=None if not args.no_graph else False, steps_per_graph=50,
-                        conditional_rebuild=args.conditional_rebuild, neighbour_search=args.neighbour_search)
+                        conditional_rebuild=args.conditional_rebuild, neighbour_search=args.neighbour_search,
+                        wall_stage=args.wall_stage)
     t_build = time.perf_counter() - t0
     settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps)
     ke = sim.kinetic_energy() / args.spheres
@@ -122,7 +126,7 @@ def main(argv=None) -> dict:
         box_width_m=round(width, 4), settle_sim_time_s=round(settle_sim_time, 3), settle_wall_s=round(t_settle, 1),
         ke_per_particle_J=float(f"{ke.max():.3g}"), build_s=round(t_build, 1), warp=wp.config.version,
         graph=sim.use_graph, order=args.order, conditional_rebuild=args.conditional_rebuild,
-        neighbour_search=sim.solver.neighbour_search,
+        neighbour_search=sim.solver.neighbour_search, wall_stage=sim.solver.wall_stage,
         list_builds=int(sim.solver.list_builds.numpy()[0]), date=time.strftime("%Y-%m-%d"))
     print(json.dumps(result), flush=True)
     return result

@@ -18,6 +18,10 @@ UNSTABLE_MODES = ("raise", "freeze")
 # how the Verlet list finds its candidates (DEMSolver's neighbour_search)
 NEIGHBOUR_SEARCHES = ("cell_list", "hash_grid")
 DEFAULT_NEIGHBOUR_SEARCH = "cell_list"
+# how the wall contacts are computed (DEMSolver's wall_stage): collection and forces as two
+# kernels, or both in one kernel (one thread per sphere); the same results, bit for bit
+WALL_STAGES = ("split", "fused")
+DEFAULT_WALL_STAGE = "split"
 
 
 class WallStats:
@@ -98,17 +102,24 @@ class DEMSolver:
             :class:`~warpdem.stages.cell_list.CellList`, plain kernel launches that return at
             once on steps without a rebuild) or ``"hash_grid"`` (Warp's ``wp.HashGrid``, rebuilt
             every step). Both give the same list, entry for entry.
+        wall_stage: how the wall contacts are computed: ``"split"`` (default; wall-contact
+            collection and wall forces as two kernels, the contacts passed through
+            ``WallSlots``) or ``"fused"`` (one kernel per contact law doing both for a sphere in
+            one thread). Both give the same results, bit for bit.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  neighbour_skin: float | None = None, max_neighbours: int | None = None,
                  conditional_rebuild: bool = False, v_max: float | None = None,
-                 neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH) -> None:
+                 neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH, wall_stage: str = DEFAULT_WALL_STAGE) -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
         if neighbour_search not in NEIGHBOUR_SEARCHES:
             raise ConfigError(f"neighbour_search must be one of {NEIGHBOUR_SEARCHES}, got {neighbour_search!r}")
         self.neighbour_search = neighbour_search
+        if wall_stage not in WALL_STAGES:
+            raise ConfigError(f"wall_stage must be one of {WALL_STAGES}, got {wall_stage!r}")
+        self.wall_stage = wall_stage
         self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
         self.dt = float(dt)
         self.v_ref = float(v_ref)
@@ -401,7 +412,7 @@ class DEMSolver:
         wall contacts, wall forces and wear, particle forces (:mod:`warpdem.stages`), from
         ``state_in``'s history into ``state_out``'s, forces into ``sphere_f``/``sphere_t``.
         ``walls_on=False`` leaves the walls out (profiling); a model without walls skips the
-        wall stages too."""
+        wall stages too. The wall stages are two kernels or one (``wall_stage``)."""
         m = self.model
         d = m.device
         n = m.num_spheres
@@ -411,7 +422,11 @@ class DEMSolver:
         step = self._step_inputs(state_in, dt, walls_on)
         history = self._history(state_in)
         contacts = self._history(state_out)
-        if walls_on:
+        if walls_on and self.wall_stage == "fused":
+            wp.launch(st.collect_wall_contacts_and_forces, dim=n, inputs=[
+                p.spheres, p.neighbours, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
+                device=d)
+        elif walls_on:
             wp.launch(st.collect_wall_contacts, dim=n,
                       inputs=[p.spheres, p.neighbours, p.walls, step, contacts, p.found], device=d)
             wp.launch(st.wall_forces, dim=n,
@@ -496,20 +511,21 @@ class Simulation:
     On CUDA the inner loop is captured once in a CUDA graph (``steps_per_graph`` steps,
     even so that the state parity is preserved) and replayed. The solver options
     (``neighbour_skin``, ``max_neighbours``, ``conditional_rebuild``, ``v_max``,
-    ``neighbour_search``) are passed to :class:`DEMSolver`.
+    ``neighbour_search``, ``wall_stage``) are passed to :class:`DEMSolver`.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  use_graph: bool | None = None, steps_per_graph: int = 20, neighbour_skin: float | None = None,
                  max_neighbours: int | None = None, conditional_rebuild: bool = False,
-                 v_max: float | None = None, neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH) -> None:
+                 v_max: float | None = None, neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH,
+                 wall_stage: str = DEFAULT_WALL_STAGE) -> None:
         self.model = model
         # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
         # "freeze" (the world stays frozen and is listed, the others run on)
         self.on_unstable = "raise"
         self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
                                 max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild,
-                                v_max=v_max, neighbour_search=neighbour_search)
+                                v_max=v_max, neighbour_search=neighbour_search, wall_stage=wall_stage)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0

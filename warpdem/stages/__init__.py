@@ -21,6 +21,8 @@ from it and adds the particle contacts in neighbour order, so every sphere's for
 same float sum, in the same order, as in one fused kernel (deterministic, no atomics; a
 per-stage output summed later would change the summation order and round differently).
 Stages 1 and 2 are skipped without walls (``walls_on=False``, or a model without walls).
+With the solver's ``wall_stage="fused"`` they run as one kernel,
+``collect_wall_contacts_and_forces`` (both stages of a sphere in one thread, same results).
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ from ..contact.law import ContactLaw
 from .particle_contacts import particle_forces_kernel
 from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
                       WallSlots, WearAccumulators)
-from .wall_contacts import collect_wall_contacts, wall_forces_kernel
+from .wall_contacts import collect_wall_contacts, wall_stage_kernels
 
 __all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", "ContactParameters", "NeighbourList",
            "SphereForces", "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
@@ -41,11 +43,13 @@ __all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", 
 
 @dataclass(frozen=True)
 class ContactStages:
-    """The three contact kernels of one contact law, in launch order."""
+    """The contact kernels of one contact law: the three stages in launch order, and stages 1
+    and 2 fused into one kernel (launched instead of the first two with ``wall_stage="fused"``)."""
 
     collect_wall_contacts: "wp.Kernel"
     wall_forces: "wp.Kernel"
     particle_forces: "wp.Kernel"
+    collect_wall_contacts_and_forces: "wp.Kernel"
 
 
 @dataclass
@@ -65,4 +69,6 @@ class PackedInputs:
 @functools.lru_cache(maxsize=None)
 def contact_stages(law: ContactLaw) -> ContactStages:
     """The stage kernels of ``law`` (built once per law and cached)."""
-    return ContactStages(collect_wall_contacts, wall_forces_kernel(law), particle_forces_kernel(law))
+    walls = wall_stage_kernels(law)
+    return ContactStages(collect_wall_contacts, walls.wall_forces, particle_forces_kernel(law),
+                         walls.collect_wall_contacts_and_forces)

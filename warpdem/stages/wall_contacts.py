@@ -1,5 +1,10 @@
 """Wall stages: collect the wall contacts of each sphere, then their forces and wall wear.
 
+Each stage's per-sphere work is a ``wp.func`` (:func:`collect_sphere_wall_contacts`, and the
+per-law ``wall_forces_of_sphere`` of :func:`wall_stage_kernels`); the kernels are thin
+wrappers: stage 1 and stage 2 as two launches (``wall_stage="split"``), or both in one thread
+(``"fused"``), with the same float operations in the same order.
+
 A wall moves rigidly: a point x0 of its rest mesh is at x(t) = c(t) + R(w tau) (x0 - c0). The
 mesh is never moved: a sphere at x is looked up in the rest mesh at x0 = c0 + R^T (x - c(t))
 (:func:`warpdem.kernels.point_in_wall_rest_frame`) and the closest point and normal found
@@ -8,6 +13,7 @@ there are mapped back to the world frame.
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import warp as wp
 
@@ -23,10 +29,10 @@ from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereFo
 wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 
-@wp.kernel
-def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet, step: StepInputs,
-                          contacts: ContactHistory, found: WallSlots):
-    """Stage 1, one thread per sphere: the wall contacts of sphere i at the step's time.
+@wp.func
+def collect_sphere_wall_contacts(i: int, spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
+                                 step: StepInputs, contacts: ContactHistory, found: WallSlots) -> int:
+    """The wall contacts of sphere i at the step's time; returns how many (slots 0 .. n - 1).
 
     The closest feature of every triangle within the sphere's radius (rest-frame BVH query)
     is a candidate. A candidate and a collected contact describe one contact if their normals
@@ -39,8 +45,7 @@ def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: 
     contact beyond the slots counts into ``step.overflow``. Spheres of inactive bodies or
     paused worlds get none (the particle stage handles them); a sphere that is neither near a
     static wall (list build) nor in a world with a moving wall is decided without reading its
-    state."""
-    i = wp.tid()
+    state. ``found.count`` is left to the caller (the stage-1 kernel or the fused wall stage)."""
     world = spheres.world[i]
     close_to_static_wall = neighbours.near_static_wall[i]
     first_wall = walls.world_start[world]
@@ -50,12 +55,10 @@ def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: 
     for kk in range(n_walls):
         any_wall = any_wall + walls.moving[walls.world_index[first_wall + kk]]
     if any_wall == 0 or step.world_paused[world] != 0:
-        found.count[i] = 0
-        return
+        return 0
     me = spheres.view[i]
     if me.r < 0.0:
-        found.count[i] = 0
-        return
+        return 0
     base = i * contacts.slots
     max_contacts = contacts.slots
     xi = me.x
@@ -145,7 +148,16 @@ def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: 
                 found.point[base + n_kept] = found.point[base + s]
                 found.triangle[base + n_kept] = found.triangle[base + s]
             n_kept += 1
-    found.count[i] = n_kept
+    return n_kept
+
+
+@wp.kernel
+def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet, step: StepInputs,
+                          contacts: ContactHistory, found: WallSlots):
+    """Stage 1, one thread per sphere: :func:`collect_sphere_wall_contacts` of sphere i, its
+    count into ``found.count`` (0 for spheres without wall contacts)."""
+    i = wp.tid()
+    found.count[i] = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
 
 
 @wp.func
@@ -162,31 +174,40 @@ def accumulate_wear(wear: WearAccumulators, entry: int, fn: float, ft: wp.vec3, 
     wp.atomic_add(wear.impulse_t, entry, wp.length(ft) * dt)
 
 
-@functools.lru_cache(maxsize=None)
-def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
-    """Stage 2 of one contact law (built and cached per law), one thread per sphere.
+@dataclass(frozen=True)
+class WallStageKernels:
+    """The wall kernels of one contact law: stage 2 alone (after :func:`collect_wall_contacts`)
+    and stages 1 + 2 fused into one kernel (the same functions, in the same thread)."""
 
-    For each wall contact that stage 1 found: last step's history of the same wall is taken if
-    its normal agrees (cosine > WALL_MATCH_COS); the wall material's velocity at the contact
-    point (v + w x (p - c(t)) while the wall moves) gives the relative motion; the law gives
-    fn, ft and the rolling torque (damped for the mass of ``law.clump_damping_mass``). Writes the springs into this step's history, the summed
-    force F = sum (fn n + ft) [N] and torque T = sum ((p - x_b) x F + torque) [N m] about the
-    body's centre into ``forces`` (the particle stage adds on), and, if the law tracks wear,
-    the per-triangle accumulators (atomic adds: many spheres touch one triangle). A sphere
-    without wall contacts returns at once and writes nothing."""
+    wall_forces: "wp.Kernel"
+    collect_wall_contacts_and_forces: "wp.Kernel"
+
+
+@functools.lru_cache(maxsize=None)
+def wall_stage_kernels(law: ContactLaw) -> WallStageKernels:
+    """The wall-force kernels of one contact law (built and cached per law), one thread per sphere.
+
+    Both call ``wall_forces_of_sphere`` (compiled per law): for each wall contact that stage 1
+    found: last step's history of the same wall is taken if its normal agrees (cosine >
+    WALL_MATCH_COS); the wall material's velocity at the contact point (v + w x (p - c(t))
+    while the wall moves) gives the relative motion; the law gives fn, ft and the rolling
+    torque (damped for the mass of ``law.clump_damping_mass``). Writes the springs into this
+    step's history, the summed force F = sum (fn n + ft) [N] and torque
+    T = sum ((p - x_b) x F + torque) [N m] about the body's centre into ``forces`` (the particle
+    stage adds on), and, if the law tracks wear, the per-triangle accumulators (atomic adds:
+    many spheres touch one triangle). A sphere without wall contacts returns at once and writes
+    nothing (the fused kernel writes its count 0)."""
     evaluate = law_evaluator(law)
     damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     track_wear = bool(law.track_wear)
     roll_hist = bool(law.needs_rolling_history)
 
-    @wp.kernel
-    def wall_forces(spheres: SphereSet, walls: WallSet, params: ContactParameters, step: StepInputs,
-                    history: ContactHistory, contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
-                    forces: SphereForces):
-        i = wp.tid()
-        n_found = found.count[i]  # 0 for inactive spheres and paused worlds (stage 1)
-        if n_found == 0:
-            return
+    @wp.func
+    def wall_forces_of_sphere(i: int, n_found: int, spheres: SphereSet, walls: WallSet, params: ContactParameters,
+                              step: StepInputs, history: ContactHistory, contacts: ContactHistory, found: WallSlots,
+                              wear: WearAccumulators, forces: SphereForces):
+        """Forces, torques and wear of the ``n_found`` (> 0) wall contacts of sphere i in slots
+        0 .. n_found - 1 of ``contacts``/``found``."""
         me = spheres.view[i]
         world = spheres.world[i]
         base = i * contacts.slots
@@ -254,4 +275,34 @@ def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
         forces.force[i] = f_sum
         forces.torque[i] = t_sum
 
-    return wall_forces
+    @wp.kernel
+    def wall_forces(spheres: SphereSet, walls: WallSet, params: ContactParameters, step: StepInputs,
+                    history: ContactHistory, contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
+                    forces: SphereForces):
+        """Stage 2: the forces of the wall contacts stage 1 left in ``found``."""
+        i = wp.tid()
+        n_found = found.count[i]  # 0 for inactive spheres and paused worlds (stage 1)
+        if n_found == 0:
+            return
+        wall_forces_of_sphere(i, n_found, spheres, walls, params, step, history, contacts, found, wear, forces)
+
+    @wp.kernel
+    def collect_wall_contacts_and_forces(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
+                                         params: ContactParameters, step: StepInputs, history: ContactHistory,
+                                         contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
+                                         forces: SphereForces):
+        """Stages 1 and 2 of sphere i in one thread (``wall_stage="fused"``): one launch, and the
+        contacts just found are read back by the thread that wrote them."""
+        i = wp.tid()
+        n_found = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
+        found.count[i] = n_found  # the particle stage appends after these
+        if n_found == 0:
+            return
+        wall_forces_of_sphere(i, n_found, spheres, walls, params, step, history, contacts, found, wear, forces)
+
+    return WallStageKernels(wall_forces, collect_wall_contacts_and_forces)
+
+
+def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
+    """Stage 2 of ``law`` alone (see :func:`wall_stage_kernels`)."""
+    return wall_stage_kernels(law).wall_forces
