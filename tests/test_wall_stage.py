@@ -5,7 +5,10 @@ option and their body states, contact counts, forces and wall wear compared with
 ``np.array_equal``. Both options call the same ``wp.func``s, so every float operation is the
 same, in the same order. The same comparison runs on ``cuda`` where a GPU is present (skipped
 otherwise): there the compiler inlines the functions into different kernels, so it also checks
-that no floating-point contraction differs between them.
+that no floating-point contraction differs between them. One exception on CUDA: the per-triangle
+wear accumulators are summed with atomic adds from many threads, in an order the GPU does not fix,
+so run to run (even split against split) they agree only to float rounding (rtol 1e-5); on an
+H100 the body states matched bit for bit and only ``wear_impulse_n`` differed.
 """
 from __future__ import annotations
 
@@ -48,7 +51,10 @@ def test_fused_wall_stage_is_bitwise_identical_to_split(name, device, monkeypatc
     assert int(split["contact_count"].sum()) > 0  # the scene has contacts
     assert split.keys() == fused.keys()
     for key, want in split.items():
-        assert np.array_equal(fused[key], want), f"{name}/{key}: fused differs from split"
+        if device == "cuda" and key.startswith("wear_"):
+            np.testing.assert_allclose(fused[key], want, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{key}")
+        else:
+            assert np.array_equal(fused[key], want), f"{name}/{key}: fused differs from split"
 
 
 def test_wall_stage_option_is_passed_to_the_solver(monkeypatch):
