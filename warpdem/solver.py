@@ -19,7 +19,8 @@ UNSTABLE_MODES = ("raise", "freeze")
 NEIGHBOUR_SEARCHES = ("cell_list", "hash_grid")
 DEFAULT_NEIGHBOUR_SEARCH = "cell_list"
 # how the wall contacts are computed (DEMSolver's wall_stage): collection and forces as two
-# kernels, or both in one kernel (one thread per sphere); the same results, bit for bit
+# kernels, or both in one kernel (one thread per sphere); the same body states, bit for bit
+# (wear sums on a GPU agree to float rounding: their atomic adds are unordered)
 WALL_STAGES = ("split", "fused")
 DEFAULT_WALL_STAGE = "split"
 
@@ -105,7 +106,9 @@ class DEMSolver:
         wall_stage: how the wall contacts are computed: ``"split"`` (default; wall-contact
             collection and wall forces as two kernels, the contacts passed through
             ``WallSlots``) or ``"fused"`` (one kernel per contact law doing both for a sphere in
-            one thread). Both give the same results, bit for bit.
+            one thread). Both give the same body states, bit for bit (on a GPU the per-triangle
+            wear sums agree to float rounding: atomic adds in no fixed order). Measured on an H100:
+            "fused" is 2 % faster at 1e6 spheres and 4-5 % slower on small drum models.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
