@@ -58,7 +58,7 @@ def test_shipped_configs_are_in_the_wheel(installed, tmp_path):
     code = ("import importlib.resources as r; "
             "print(all(r.files(p).joinpath(f).is_file() for p, f in ["
             "('calibration', 'configs/quick_calibration.yaml'), ('validation', 'configs/tiny_diagnosis.yaml'), "
-            "('validation', 'configs/tiny_lab.yaml'), ('pump', 'configs/quick_pump.yaml')]))")
+            "('validation', 'configs/tiny_lab.yaml'), ('validation', 'configs/first_diagnosis.yaml'), ('validation', 'configs/first_lab.yaml'), ('pump', 'configs/quick_pump.yaml')]))")
     out = subprocess.run([str(installed / "bin" / "python"), "-c", code], capture_output=True, text=True,
                          cwd=tmp_path, check=True).stdout.strip()
     assert out == "True"

@@ -17,8 +17,9 @@ their off value, which adds exactly nothing. It writes, per case,
 - ``truth_<case>.json``: the hidden model and parameters, kept apart for the scoring afterwards.
 
 Scales: "paper" (spheres 16-20 mm by number, 16 kg box, paper drum (one revolution discarded, two
-recorded), 10 kg hollow cylinder lifted at 0.1 m/s; GPU), "quick" (the quick presets; a few minutes on 2 CPU cores) and "tiny" (a 9 kg
-baffle test only, for the smoke test of the whole chain).
+recorded), 10 kg hollow cylinder lifted at 0.1 m/s; GPU), "quick" (the quick presets; a few minutes on 2 CPU cores),
+"first" (the 9 kg baffle test and a 3 kg quick hollow cylinder: the README's first diagnosis on 2 CPU
+cores) and "tiny" (a 9 kg baffle test only, for the smoke test of the whole chain).
 """
 from __future__ import annotations
 
@@ -63,8 +64,11 @@ def conditions(scale: str) -> dict[str, dict[str, dict[str, Any]]]:
         return {"baffle": {"16kg": {"fill_mass": 16.0}},
                 "drum": {f"{r}rpm": {"rpm": float(r), "discard": 1, "record": 2} for r in (15, 30, 45)},
                 "cylinder": {"10kg": {"fill_mass": 10.0, "lift_speed": 0.1}}}
+    tiny_baffle = {"9kg": {"fill_mass": 9.0, "lift_to": 0.25, "max_time_after_lift": 1.5, "min_bins": 2}}
     if scale == "tiny":  # a smoke test of the whole chain in seconds (quick presets, small fills)
-        return {"baffle": {"9kg": {"fill_mass": 9.0, "lift_to": 0.25, "max_time_after_lift": 1.5, "min_bins": 2}}}
+        return {"baffle": tiny_baffle}
+    if scale == "first":  # the README's first diagnosis: the tiny baffle test and a small pile (2 CPU cores)
+        return {"baffle": tiny_baffle, "cylinder": {"3kg": {"fill_mass": 3.0}}}
     return {"baffle": {"quick": {}}, "drum": {f"{r}rpm": {"rpm": float(r)} for r in (15, 30, 45)},
             "cylinder": {"quick": {}}}
 
@@ -75,8 +79,8 @@ def lab_material(scale: str) -> dict[str, Any] | None:
 
 
 def _experiment_scale(exp: str, scale: str) -> str:
-    """The experiment preset of a lab scale ("tiny" runs the quick presets with small fills)."""
-    return "quick" if scale == "tiny" else scale
+    """The experiment preset of a lab scale ("tiny" and "first" run the quick presets with small fills)."""
+    return "quick" if scale in ("tiny", "first") else scale
 
 
 #: the lab holds every case in one model: the union of the effects, each case's absent effects at
@@ -152,7 +156,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
     out.mkdir(parents=True, exist_ok=True)
     for case in cases:
         doc = {"format": "warpdem-measurements/2",
-               "title": f"synthetic lab data, case '{case}' ({scale} scale)",
+               "title": f"synthetic lab data ({scale} scale)",  # no case name: the truth stays in truth_*.json
                "source": "validation/hidden_effects.py: the engine as the lab; the hidden model is in truth_*.json",
                "experiments": experiments[case]}
         if mat_cfg is not None:
@@ -241,6 +245,12 @@ def diagnosis_config(case: str, scale: str, dt: float | None = None) -> dict[str
                             "confirm_replicates": 2, "refine_points": 6}
     if scale != "paper":
         cfg["model"]["material"] = None
+    if scale == "first":
+        cfg["candidates"] = ["rolling_resistance", "cohesion"]
+        cfg["effect_ranges"] = {"cohesion_energy_density_pp": [0.0, 3.0e5], "cohesion_energy_density_pw": [0.0, 3.0e5]}
+        cfg["diagnosis"] = {"design_points_per_parameter": 2, "min_design_points": 6, "replicates": 2,
+                            "confirm_replicates": 2, "refine_points": 0, "scan_points": 1024,
+                            "evidence_samples": 1024, "gp_restarts": 0, "cv_folds": 3}
     if scale == "tiny":
         cfg["candidates"] = ["rolling_resistance"]
         cfg["diagnosis"] = {"design_points_per_parameter": 2, "min_design_points": 5, "replicates": 2,
@@ -252,7 +262,7 @@ def diagnosis_config(case: str, scale: str, dt: float | None = None) -> dict[str
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", default="results/hidden_effects")
-    ap.add_argument("--scale", default="paper", choices=["paper", "quick", "tiny"])
+    ap.add_argument("--scale", default="paper", choices=["paper", "quick", "first", "tiny"])
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--device", default=None)
