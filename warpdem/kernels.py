@@ -445,74 +445,116 @@ def wall_overlap(
 
 
 # ----------------------------------------------------------------------------- neighbours
-# The list kernel's candidate test and row ending are shared, as ``wp.func``s, by the hash-grid
+# The list build reads and writes packed structs, like the contact stages (warpdem.stages):
+# ``ListSpheres`` (packed per State, ``DEMSolver._list_spheres``), ``WallSet`` and
+# ``VerletBuild`` (packed once, ``DEMSolver.pack_contact_inputs``). ``WallSet`` and
+# ``NeighbourList`` are the contact stages' structs too (re-exported by
+# warpdem.stages.structs); they are defined here because the stages import this module. The
+# list kernel's candidate test and row ending are shared, as ``wp.func``s, by the hash-grid
 # kernel below and the cell-list kernel (warpdem.stages.cell_list), so both searches produce
 # the same list from the same candidates.
+@wp.struct
+class NeighbourList:
+    """The Verlet list of :func:`warpdem.kernels.build_neighbour_list` (sorted by index)."""
+
+    count: wp.array(dtype=int)  # entries per sphere
+    index: wp.array(dtype=int)  # neighbour sphere indices, ``capacity`` slots per sphere
+    capacity: int  # slots per sphere (``max_neighbours``)
+    near_static_wall: wp.array(dtype=int)  # 1: a static wall lies within r_i + skin (query its BVH)
+
+
+@wp.struct
+class WallSet:
+    """Triangle-mesh walls with prescribed rigid motion, each looked up in its rest frame."""
+
+    mesh: wp.array(dtype=wp.uint64)  # wp.Mesh id of each wall's rest mesh (BVH)
+    world_start: wp.array(dtype=int)  # CSR: the walls of world w are world_index[world_start[w]:world_start[w+1]]
+    world_index: wp.array(dtype=int)
+    moving: wp.array(dtype=int)  # 1: the wall has a prescribed motion
+    material: wp.array(dtype=int)  # material index
+    tri_offset: wp.array(dtype=int)  # index of the wall's first triangle among all walls' triangles
+    lin_vel: wp.array(dtype=wp.vec3)  # translation velocity v [m/s]
+    ang_vel: wp.array(dtype=wp.vec3)  # angular velocity w [rad/s]
+    origin: wp.array(dtype=wp.vec3)  # rotation centre c0 at rest [m]
+    t_start: wp.array(dtype=float)  # motion window [t_start, t_stop) [s]
+    t_stop: wp.array(dtype=float)
+
+
+@wp.struct
+class ListSpheres:
+    """What a list build reads of the spheres: one State's positions and active flags with
+    the model's radii, worlds and bodies, and the search distances."""
+
+    position: wp.array(dtype=wp.vec3)  # sphere centre x [m] (the State's ``sphere_x``)
+    radius: wp.array(dtype=float)  # sphere radius r [m]
+    world: wp.array(dtype=int)  # world index of each sphere
+    body: wp.array(dtype=int)  # body index of each sphere
+    body_active: wp.array(dtype=int)  # 1: the body is in play (the State's ``body_active``)
+    max_radius: float  # largest sphere radius r_max [m]
+    skin: float  # Verlet skin [m]: pairs closer than r_i + r_j + skin are listed
+
+
+@wp.struct
+class VerletBuild:
+    """What a list build writes: the list, the positions it was built at, the overflow
+    counters, and the device flag that requests the build."""
+
+    neighbours: NeighbourList  # the list (``capacity`` = max_neighbours slots per sphere)
+    x_at_build: wp.array(dtype=wp.vec3)  # sphere centre at the last build [m]
+    overflow: wp.array(dtype=int)  # [0]: entries dropped; [1]: the longest row a sphere needed
+    rebuild: wp.array(dtype=int)  # [0] != 0: build now (else every thread returns at once)
+
+
 @wp.func
 def add_verlet_candidate(
     j: int,
     xi: wp.vec3,
     ri: float,
     body_i: int,
-    sphere_x: wp.array(dtype=wp.vec3),
-    sphere_radius: wp.array(dtype=float),
-    sphere_body: wp.array(dtype=int),
-    body_active: wp.array(dtype=int),
-    skin: float,
-    max_neighbours: int,
     row_start: int,
     n_kept: int,
     n_dropped: int,
-    nb_index: wp.array(dtype=int),
-    overflow: wp.array(dtype=int),
+    spheres: ListSpheres,
+    out: VerletBuild,
 ):
     """Offer sphere ``j`` to the list row of a sphere at ``xi`` [m] of radius ``ri`` [m] and body
-    ``body_i`` (row ``nb_index[row_start : row_start + n_kept]``, sorted by index). ``j`` is
-    kept if it belongs to another, active body and its centre is closer than
-    r_i + r_j + ``skin`` [m]; it is inserted in index order (so the row does not depend on the
+    ``body_i`` (row ``out.neighbours.index[row_start : row_start + n_kept]``, sorted by index).
+    ``j`` is kept if it belongs to another, active body and its centre is closer than
+    r_i + r_j + skin [m]; it is inserted in index order (so the row does not depend on the
     order candidates are offered, unless the row is full). A full row counts the drop in
-    ``overflow[0]``. Returns the row's new (kept, dropped) counts."""
-    bj = sphere_body[j]
-    if bj == body_i or body_active[bj] == 0:  # removed bodies stay where they left, out of play
+    ``out.overflow[0]``. Returns the row's new (kept, dropped) counts."""
+    bj = spheres.body[j]
+    if bj == body_i or spheres.body_active[bj] == 0:  # removed bodies stay where they left, out of play
         return n_kept, n_dropped
-    d = xi - sphere_x[j]
-    reach = ri + sphere_radius[j] + skin
+    d = xi - spheres.position[j]
+    reach = ri + spheres.radius[j] + spheres.skin
     if wp.dot(d, d) >= reach * reach:
         return n_kept, n_dropped
-    if n_kept >= max_neighbours:
+    if n_kept >= out.neighbours.capacity:
         # overflow[0]: entries dropped; overflow[1]: the largest list any sphere needed
-        wp.atomic_add(overflow, 0, 1)
+        wp.atomic_add(out.overflow, 0, 1)
         return n_kept, n_dropped + 1
     # insertion keeps the list sorted by index
+    row = out.neighbours.index
     k = n_kept
-    while k > 0 and nb_index[row_start + k - 1] > j:
-        nb_index[row_start + k] = nb_index[row_start + k - 1]
+    while k > 0 and row[row_start + k - 1] > j:
+        row[row_start + k] = row[row_start + k - 1]
         k -= 1
-    nb_index[row_start + k] = j
+    row[row_start + k] = j
     return n_kept + 1, n_dropped
 
 
 @wp.func
-def near_static_wall(
-    xi: wp.vec3,
-    ri: float,
-    skin: float,
-    world: int,
-    wall_mesh: wp.array(dtype=wp.uint64),
-    world_wall_start: wp.array(dtype=int),
-    world_wall_index: wp.array(dtype=int),
-    wall_moving: wp.array(dtype=int),
-):
+def near_static_wall(xi: wp.vec3, ri: float, skin: float, world: int, walls: WallSet):
     """1 if a triangle of a static wall of ``world`` lies within the box xi +- (r_i + skin) [m]
-    (its BVH is then queried each step), else 0 (``world_wall_start/index``: the walls of
-    each world, CSR)."""
+    (its BVH is then queried each step), else 0."""
     near = int(0)
     ext = wp.vec3(ri + skin, ri + skin, ri + skin)
-    for kk in range(world_wall_start[world], world_wall_start[world + 1]):
-        k = world_wall_index[kk]
-        if wall_moving[k] != 0:
+    for kk in range(walls.world_start[world], walls.world_start[world + 1]):
+        k = walls.world_index[kk]
+        if walls.moving[k] != 0:
             continue
-        mq = wp.mesh_query_aabb(wall_mesh[k], xi - ext, xi + ext)
+        mq = wp.mesh_query_aabb(walls.mesh[k], xi - ext, xi + ext)
         tri = int(0)
         if wp.mesh_query_aabb_next(mq, tri):
             near = 1
@@ -526,77 +568,50 @@ def finish_verlet_row(
     ri: float,
     active: int,
     world: int,
-    skin: float,
     n_kept: int,
     n_dropped: int,
-    wall_mesh: wp.array(dtype=wp.uint64),
-    world_wall_start: wp.array(dtype=int),
-    world_wall_index: wp.array(dtype=int),
-    wall_moving: wp.array(dtype=int),
-    nb_count: wp.array(dtype=int),
-    near_wall: wp.array(dtype=int),
-    x_at_build: wp.array(dtype=wp.vec3),
-    overflow: wp.array(dtype=int),
+    spheres: ListSpheres,
+    walls: WallSet,
+    out: VerletBuild,
 ):
-    """Close sphere ``i``'s row: its length, the largest length needed (``overflow[1]``, if
+    """Close sphere ``i``'s row: its length, the largest length needed (``out.overflow[1]``, if
     entries were dropped), whether a static wall is near (0 for an inactive sphere) and the
     position [m] the row was built at."""
-    x_at_build[i] = xi
-    nb_count[i] = n_kept
+    out.x_at_build[i] = xi
+    out.neighbours.count[i] = n_kept
     if n_dropped > 0:
-        wp.atomic_max(overflow, 1, n_kept + n_dropped)
+        wp.atomic_max(out.overflow, 1, n_kept + n_dropped)
     near = int(0)
     if active != 0:
-        near = near_static_wall(xi, ri, skin, world, wall_mesh, world_wall_start, world_wall_index, wall_moving)
-    near_wall[i] = near
+        near = near_static_wall(xi, ri, spheres.skin, world, walls)
+    out.neighbours.near_static_wall[i] = near
 
 
 @wp.kernel
-def build_neighbour_list(
-    grid: wp.uint64,
-    sphere_x: wp.array(dtype=wp.vec3),
-    sphere_radius: wp.array(dtype=float),
-    sphere_world: wp.array(dtype=int),
-    sphere_body: wp.array(dtype=int),
-    body_active: wp.array(dtype=int),
-    max_radius: float,
-    skin: float,
-    max_neighbours: int,
-    wall_mesh: wp.array(dtype=wp.uint64),
-    world_wall_start: wp.array(dtype=int),
-    world_wall_index: wp.array(dtype=int),
-    wall_moving: wp.array(dtype=int),
-    nb_count: wp.array(dtype=int),
-    nb_index: wp.array(dtype=int),
-    near_wall: wp.array(dtype=int),
-    x_at_build: wp.array(dtype=wp.vec3),
-    overflow: wp.array(dtype=int),
-    rebuild: wp.array(dtype=int),
-):
-    """Verlet list from Warp's hash grid (grouped by world): spheres of the same world and
-    another body within r_i + r_j + skin, sorted by index (:func:`add_verlet_candidate`); and
-    whether a static wall of its world lies within r_i + skin (:func:`near_static_wall`).
-    Valid while no sphere moves more than skin / 2. Does nothing unless ``rebuild[0]`` is set,
-    so the launch can sit unconditionally in a CUDA graph. The cell-list search
+def build_neighbour_list(grid: wp.uint64, spheres: ListSpheres, walls: WallSet, out: VerletBuild):
+    """Verlet list from Warp's hash grid ``grid`` (grouped by world): spheres of the same world
+    and another body within r_i + r_j + skin, sorted by index (:func:`add_verlet_candidate`);
+    and whether a static wall of its world lies within r_i + skin (:func:`near_static_wall`).
+    Valid while no sphere moves more than skin / 2. Does nothing unless ``out.rebuild[0]`` is
+    set, so the launch can sit unconditionally in a CUDA graph. The cell-list search
     (:mod:`warpdem.stages.cell_list`) builds the same list without the hash grid."""
-    if rebuild[0] == 0:
+    if out.rebuild[0] == 0:
         return
     i = wp.tid()
-    xi = sphere_x[i]
-    ri = sphere_radius[i]
-    b = sphere_body[i]
-    active = body_active[b]
-    base = i * max_neighbours
+    xi = spheres.position[i]
+    ri = spheres.radius[i]
+    b = spheres.body[i]
+    world = spheres.world[i]
+    active = spheres.body_active[b]
+    base = i * out.neighbours.capacity
     n = int(0)
     n_dropped = int(0)
     if active != 0:
-        q = wp.hash_grid_query(grid, xi, ri + max_radius + skin, sphere_world[i])
+        q = wp.hash_grid_query(grid, xi, ri + spheres.max_radius + spheres.skin, world)
         j = int(0)
         while wp.hash_grid_query_next(q, j):
-            n, n_dropped = add_verlet_candidate(j, xi, ri, b, sphere_x, sphere_radius, sphere_body, body_active,
-                                                skin, max_neighbours, base, n, n_dropped, nb_index, overflow)
-    finish_verlet_row(i, xi, ri, active, sphere_world[i], skin, n, n_dropped, wall_mesh, world_wall_start,
-                      world_wall_index, wall_moving, nb_count, near_wall, x_at_build, overflow)
+            n, n_dropped = add_verlet_candidate(j, xi, ri, b, base, n, n_dropped, spheres, out)
+    finish_verlet_row(i, xi, ri, active, world, n, n_dropped, spheres, walls, out)
 
 
 @wp.kernel

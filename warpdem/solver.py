@@ -277,17 +277,15 @@ class DEMSolver:
         allocates and sorts with CUB, so it cannot sit in a conditional CUDA-graph node); the
         list kernel returns at once unless a rebuild is due."""
         m = self.model
-        search_inputs = [state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active,
-                         m.max_radius, self.skin, self.max_neighbours, m.wall_mesh, m.world_wall_start,
-                         m.world_wall_index, self.wall_moving, self.nb_count, self.nb_index, self.near_wall,
-                         self.x_at_build, self.nb_overflow, self.rebuild]
+        spheres = self._list_spheres(state)
+        walls, build = self._packed.walls, self._verlet_build
         if self.cell_list is not None:
             self.cell_list.build(state.sphere_x, m.sphere_world, m.sphere_body, state.body_active, self.rebuild)
-            wp.launch(build_neighbour_list_from_cells, dim=m.num_spheres, inputs=[self.cell_list.table, *search_inputs],
-                      device=m.device)
+            wp.launch(build_neighbour_list_from_cells, dim=m.num_spheres,
+                      inputs=[self.cell_list.table, spheres, walls, build], device=m.device)
         else:
             self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
-            wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[self.grid.id, *search_inputs],
+            wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[self.grid.id, spheres, walls, build],
                       device=m.device)
         wp.launch(kernels.finish_build, dim=1, inputs=[self.rebuild, self.list_builds], device=m.device)
 
@@ -332,10 +330,12 @@ class DEMSolver:
         self.rebuild.fill_(1)
 
     def pack_contact_inputs(self) -> None:
-        """Pack the model's and the solver's arrays that the contact stages read into their
-        structs (:mod:`warpdem.stages.structs`; references, no copies). Done once at
-        construction; call again after replacing any of those arrays (the per-State history
-        and the step's time are packed at launch)."""
+        """Pack the model's and the solver's arrays that the contact stages and the
+        neighbour-list build read or write into their structs (:mod:`warpdem.stages.structs`,
+        and :class:`~warpdem.kernels.VerletBuild` for the list build, which shares the
+        neighbour list and walls with the stages; references, no copies). Done once at
+        construction; call again after replacing any of those arrays (the per-State history,
+        the per-State spheres of the list build and the step's time are packed at launch)."""
         m = self.model
         spheres = stages.SphereSet()
         spheres.view = self.views
@@ -375,7 +375,14 @@ class DEMSolver:
         forces.force = self.sphere_f
         forces.torque = self.sphere_t
         self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces)
+        build = kernels.VerletBuild()
+        build.neighbours = neighbours  # a copy of the struct (its array references): pack it filled
+        build.x_at_build = self.x_at_build
+        build.overflow = self.nb_overflow
+        build.rebuild = self.rebuild
+        self._verlet_build = build
         self._packed_history: dict[int, tuple[tuple, stages.ContactHistory]] = {}
+        self._packed_list_spheres: dict[int, tuple[tuple, tuple[float, float], kernels.ListSpheres]] = {}
         self._packed_step: dict[tuple, tuple[wp.array, stages.StepInputs]] = {}
 
     def _history(self, state: State) -> stages.ContactHistory:
@@ -392,6 +399,25 @@ class DEMSolver:
             self._packed_history.clear()
         self._packed_history[id(state)] = (arrays, h)
         return h
+
+    def _list_spheres(self, state: State) -> kernels.ListSpheres:
+        """What the list build reads of ``state``'s spheres (its positions and active flags,
+        the model's radii, worlds and bodies, r_max and the skin [m]; packed once per State)."""
+        m = self.model
+        arrays = (state.sphere_x, m.sphere_radius, m.sphere_world, m.sphere_body, state.body_active)
+        distances = (float(m.max_radius), float(self.skin))
+        cached = self._packed_list_spheres.get(id(state))
+        if cached is not None:
+            cached_arrays, cached_distances, cached_spheres = cached
+            if all(a is b for a, b in zip(cached_arrays, arrays)) and cached_distances == distances:
+                return cached_spheres
+        spheres = kernels.ListSpheres()
+        spheres.position, spheres.radius, spheres.world, spheres.body, spheres.body_active = arrays
+        spheres.max_radius, spheres.skin = distances
+        if len(self._packed_list_spheres) > 4:  # States of this solver: usually two
+            self._packed_list_spheres.clear()
+        self._packed_list_spheres[id(state)] = (arrays, distances, spheres)
+        return spheres
 
     def _step_inputs(self, state: State, dt: float, walls_on: bool) -> stages.StepInputs:
         """The step struct for ``state``'s time, ``dt`` [s] and whether the wall stages run."""

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..kernels import add_verlet_candidate, finish_verlet_row
+from ..kernels import ListSpheres, VerletBuild, WallSet, add_verlet_candidate, finish_verlet_row
 
 wp.set_module_options({"enable_backward": False, "fast_math": True})
 
@@ -224,46 +224,26 @@ def scatter_spheres(
 
 
 @wp.kernel
-def build_neighbour_list_from_cells(
-    table: CellTable,
-    sphere_x: wp.array(dtype=wp.vec3),
-    sphere_radius: wp.array(dtype=float),
-    sphere_world: wp.array(dtype=int),
-    sphere_body: wp.array(dtype=int),
-    body_active: wp.array(dtype=int),
-    max_radius: float,
-    skin: float,
-    max_neighbours: int,
-    wall_mesh: wp.array(dtype=wp.uint64),
-    world_wall_start: wp.array(dtype=int),
-    world_wall_index: wp.array(dtype=int),
-    wall_moving: wp.array(dtype=int),
-    nb_count: wp.array(dtype=int),
-    nb_index: wp.array(dtype=int),
-    near_wall: wp.array(dtype=int),
-    x_at_build: wp.array(dtype=wp.vec3),
-    overflow: wp.array(dtype=int),
-    rebuild: wp.array(dtype=int),
-):
-    """Verlet list from the cell list: the same outputs as
+def build_neighbour_list_from_cells(table: CellTable, spheres: ListSpheres, walls: WallSet, out: VerletBuild):
+    """Verlet list from the cell list ``table``: the same outputs as
     :data:`warpdem.kernels.build_neighbour_list` (spheres of the same world and another, active
     body within r_i + r_j + skin, sorted by index; near static wall; build position; overflow),
     with the candidates taken from the cells that the box x_i +- (r_i + r_max + skin) [m]
     touches (3 per axis at most for r_i = r_max, as cell_size = 2 r_max + skin; the box is
-    widened by a hair against float rounding). Does nothing unless ``rebuild[0]``."""
-    if rebuild[0] == 0:
+    widened by a hair against float rounding). Does nothing unless ``out.rebuild[0]``."""
+    if out.rebuild[0] == 0:
         return
     i = wp.tid()
-    xi = sphere_x[i]
-    ri = sphere_radius[i]
-    b = sphere_body[i]
-    world = sphere_world[i]
-    active = body_active[b]
-    base = i * max_neighbours
+    xi = spheres.position[i]
+    ri = spheres.radius[i]
+    b = spheres.body[i]
+    world = spheres.world[i]
+    active = spheres.body_active[b]
+    base = i * out.neighbours.capacity
     n = int(0)
     n_dropped = int(0)
     if active != 0:
-        reach = ri + max_radius + skin
+        reach = ri + spheres.max_radius + spheres.skin
         h = table.cell_size
         pad = wp.vec3(reach * (1.0 + QUERY_PAD)) + wp.vec3(wp.abs(xi[0]), wp.abs(xi[1]), wp.abs(xi[2])) * COORD_ROUNDING
         lo = cell_of(xi - pad, world, h)
@@ -277,11 +257,9 @@ def build_neighbour_list_from_cells(
                     for slot in range(start, start + table.bucket_count[bucket]):
                         if not (table.sorted_cell[slot] == cell):  # another cell or world in this bucket
                             continue
-                        n, n_dropped = add_verlet_candidate(table.sorted_sphere[slot], xi, ri, b, sphere_x,
-                                                            sphere_radius, sphere_body, body_active, skin,
-                                                            max_neighbours, base, n, n_dropped, nb_index, overflow)
-    finish_verlet_row(i, xi, ri, active, world, skin, n, n_dropped, wall_mesh, world_wall_start,
-                      world_wall_index, wall_moving, nb_count, near_wall, x_at_build, overflow)
+                        n, n_dropped = add_verlet_candidate(table.sorted_sphere[slot], xi, ri, b, base, n, n_dropped,
+                                                            spheres, out)
+    finish_verlet_row(i, xi, ri, active, world, n, n_dropped, spheres, walls, out)
 
 
 def bucket_count_for(num_spheres: int) -> int:

@@ -4,12 +4,19 @@ Each ``@wp.struct`` groups the arrays of one thing a stage reads or writes, so t
 kernel takes a handful of arguments instead of ~46 loose ones. A struct holds references to
 arrays (no copies): the solver packs them once (:meth:`warpdem.solver.DEMSolver.pack_contact_inputs`)
 and passes them by value at each launch. Units are SI.
+
+:class:`NeighbourList` and :class:`WallSet` are defined in :mod:`warpdem.kernels` (the
+neighbour-list build writes and reads them, and that module cannot import this one) and
+re-exported here.
 """
 from __future__ import annotations
 
 import warp as wp
 
-from ..kernels import SphereView
+from ..kernels import NeighbourList, SphereView, WallSet
+
+__all__ = ["ContactHistory", "ContactParameters", "NeighbourList", "SphereForces", "SphereSet", "StepInputs",
+           "WallSet", "WallSlots", "WearAccumulators"]
 
 
 @wp.struct
@@ -18,33 +25,6 @@ class SphereSet:
 
     view: wp.array(dtype=SphereView)  # packed sphere and body state; radius < 0: inactive body
     world: wp.array(dtype=int)  # world index of each sphere
-
-
-@wp.struct
-class NeighbourList:
-    """The Verlet list of :func:`warpdem.kernels.build_neighbour_list` (sorted by index)."""
-
-    count: wp.array(dtype=int)  # entries per sphere
-    index: wp.array(dtype=int)  # neighbour sphere indices, ``capacity`` slots per sphere
-    capacity: int  # slots per sphere (``max_neighbours``)
-    near_static_wall: wp.array(dtype=int)  # 1: a static wall lies within r_i + skin (query its BVH)
-
-
-@wp.struct
-class WallSet:
-    """Triangle-mesh walls with prescribed rigid motion, each looked up in its rest frame."""
-
-    mesh: wp.array(dtype=wp.uint64)  # wp.Mesh id of each wall's rest mesh (BVH)
-    world_start: wp.array(dtype=int)  # CSR: the walls of world w are world_index[world_start[w]:world_start[w+1]]
-    world_index: wp.array(dtype=int)
-    moving: wp.array(dtype=int)  # 1: the wall has a prescribed motion
-    material: wp.array(dtype=int)  # material index
-    tri_offset: wp.array(dtype=int)  # index of the wall's first triangle among all walls' triangles
-    lin_vel: wp.array(dtype=wp.vec3)  # translation velocity v [m/s]
-    ang_vel: wp.array(dtype=wp.vec3)  # angular velocity w [rad/s]
-    origin: wp.array(dtype=wp.vec3)  # rotation centre c0 at rest [m]
-    t_start: wp.array(dtype=float)  # motion window [t_start, t_stop) [s]
-    t_stop: wp.array(dtype=float)
 
 
 @wp.struct
