@@ -90,6 +90,8 @@ class MindlinTangential(SubModel):
         ParameterSpec("mu_s", "-", 0.5, (0.0, 10.0), "sliding (static) friction coefficient"),
     )
     needs_history = True
+    # This text enters every record's and DEM-cache key's fingerprint, so it stays as written when
+    # this was the default; the sliding rule is Luding's reset, not LIGGGHTS' (that is ``history``).
     reference = "Mindlin & Deresiewicz (1953); seed paper eqs. (4)-(8); LIGGGHTS tangential_history"
 
     def make(self, column):
