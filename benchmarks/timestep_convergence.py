@@ -17,7 +17,8 @@ Output (stdout, JSON lines only; progress goes to stderr):
   (same fill index; ``paired_diff_mean_deg`` +- ``paired_diff_sem_deg`` over ``paired_fills``) and
   the unpaired difference with the combined standard error (``unpaired_diff_sem_deg``).
 
-Options: ``--rpms`` the drum speeds (default 15 30 45); ``--fills`` fills per step and
+Options: ``--tangential`` the sliding rule (``history``, the default, or ``mindlin``, the default
+before 2026-11-27); ``--rpms`` the drum speeds (default 15 30 45); ``--fills`` fills per step and
 ``--fill-offset`` the first fill index (default 0), so that a later call can add fills
 ``offset ... offset + fills - 1`` to an earlier one (with fills per world, a batch's time step
 follows its own smallest sphere: compare the steps within one call, pool calls afterwards).
@@ -118,7 +119,8 @@ def run_step(case: str, exp_name: str, frac: float, rpms: list, args) -> dict:
     material = case_material(case, args.scale)
     if material is not None:
         kw["material"] = material
-    exp = make_experiment(exp_name, args.scale, contact_law=wd.ContactLaw(**law_cfg), fill_per_world=True,
+    law = wd.ContactLaw(**{"tangential": args.tangential, **law_cfg})
+    exp = make_experiment(exp_name, args.scale, contact_law=law, fill_per_world=True,
                           first_fill_index=args.fill_offset, dt_rayleigh_fraction=frac, **kw)
     sets = [{**params, **({"rpm": r} if r is not None else {})} for r in rpms for _ in range(args.fills)]
     log(f"{case} {exp_name} rpm={rpms} dt/t_R={frac}: {len(sets)} worlds ...")
@@ -133,7 +135,7 @@ def run_step(case: str, exp_name: str, frac: float, rpms: list, args) -> dict:
         vals = [x.angle_deg for x in chunk if x.ok]
         dens = [x.bulk_density for x in chunk if x.ok and x.bulk_density is not None]
         mean, sem = mean_sem(vals)
-        records[r] = {"case": case, "experiment": exp_name, "rpm": r, "dt_rayleigh_fraction": frac,
+        records[r] = {"case": case, "law": law.describe(), "experiment": exp_name, "rpm": r, "dt_rayleigh_fraction": frac,
                       "dt_s": res[0].timing["dt_s"], "fills": len(vals), "fill_indices": fills,
                       "angle_mean_deg": _r(mean), "angle_sem_deg": _r(sem),
                       "bulk_density": None if not dens else round(float(np.mean(dens)), 1),
@@ -150,7 +152,7 @@ def change_record(rec: dict, ref: dict) -> dict | None:
     pairs = [(a, b) for a, b in zip(rec["angles_deg"], ref["angles_deg"]) if a is not None and b is not None]
     d_mean, d_sem = mean_sem([a - b for a, b in pairs])
     sa, sb = rec["angle_sem_deg"], ref["angle_sem_deg"]
-    return {"case": rec["case"], "experiment": rec["experiment"], "rpm": rec["rpm"],
+    return {"case": rec["case"], "law": rec["law"], "experiment": rec["experiment"], "rpm": rec["rpm"],
             "dt_rayleigh_fraction": rec["dt_rayleigh_fraction"],
             "reference_fraction": ref["dt_rayleigh_fraction"], "fill_indices": rec["fill_indices"],
             "change_vs_smallest_deg": _r(rec["angle_mean_deg"] - ref["angle_mean_deg"]),
@@ -170,6 +172,8 @@ def main(argv=None) -> int:
     ap.add_argument("--fills", type=int, default=3)
     ap.add_argument("--fill-offset", type=int, default=0, help="index of the first fill")
     ap.add_argument("--processes", default="auto")
+    ap.add_argument("--tangential", default="history",
+                    help="tangential sub-model (history: LIGGGHTS, the default; mindlin: the default before 2026-11-27)")
     args = ap.parse_args(argv)
     quiet_warp()
     f_min = min(args.fractions)

@@ -216,7 +216,7 @@ def test_option_travels_from_a_config_and_names_itself():
     assert law.clump_damping_mass == "body" and law.rolling == "epsd2"
     assert law != wd.ContactLaw(rolling="epsd2")  # its own compiled kernels and records
     assert law.describe().endswith("+clump_damping:body")
-    assert wd.ContactLaw().describe() == "hertz+mindlin+rolling:none+cohesion:none"  # default text unchanged
+    assert wd.ContactLaw().describe() == "hertz+history+rolling:none+cohesion:none"  # default text unchanged
     desc = ModelDescription.from_config({"contact_law": {"clump_damping_mass": "contact_point"}})
     assert desc.contact_law == wd.ContactLaw()
     # the default is left out of records, so records and DEM-cache keys of earlier laws stay valid

@@ -29,6 +29,10 @@ R = 0.005  # sphere radius [m]
 RTOL, ATOL = 1e-5, 1e-9
 
 
+# the saved values were computed with the tangential sub-model that was the default then
+REFERENCE_TANGENTIAL = "mindlin"
+
+
 def _lattice(n: int, spacing: float, origin, rng: np.random.Generator, jitter: float) -> np.ndarray:
     """n points of a cubic lattice (``spacing`` [m]) from ``origin``, jittered by up to ``jitter`` [m]."""
     side = math.ceil(n ** (1.0 / 3.0))
@@ -40,7 +44,7 @@ def scene_drum() -> wd.Simulation:
     """Two worlds of spheres tumbling in a rotating drum (one BVH, each world's own speed and
     friction); world 1 is paused for a while (history carried over unchanged)."""
     rng = np.random.default_rng(1)
-    b = wd.ModelBuilder(num_worlds=2)
+    b = wd.ModelBuilder(num_worlds=2, contact_law=wd.ContactLaw(tangential=REFERENCE_TANGENTIAL))
     b.add_material(wd.GRAVEL)
     for w in range(2):
         pos = _lattice(27, 2.05 * R, (-0.012, -0.012, -0.0425), rng, 1e-4)
@@ -55,7 +59,7 @@ def scene_drum() -> wd.Simulation:
 def scene_clumps() -> wd.Simulation:
     """Three-sphere clumps (asymmetric inertia) falling into an open box onto each other."""
     rng = np.random.default_rng(2)
-    b = wd.ModelBuilder(contact_law=wd.ContactLaw(rolling="cdt"))
+    b = wd.ModelBuilder(contact_law=wd.ContactLaw(rolling="cdt", tangential=REFERENCE_TANGENTIAL))
     b.add_material(wd.GRAVEL)
     offsets = np.array([[-0.6 * R, 0.0, 0.0], [0.0, 0.2 * R, 0.0], [0.7 * R, 0.0, 0.1 * R]])
     radii = np.array([0.8 * R, R, 0.7 * R])
@@ -73,7 +77,7 @@ def scene_clumps() -> wd.Simulation:
 def scene_cohesion_epsd2() -> wd.Simulation:
     """Cohesive spheres (sjkr) with epsd2 rolling resistance heaped on a tilted plate."""
     rng = np.random.default_rng(3)
-    b = wd.ModelBuilder(contact_law=wd.ContactLaw(rolling="epsd2", cohesion="sjkr"))
+    b = wd.ModelBuilder(contact_law=wd.ContactLaw(rolling="epsd2", cohesion="sjkr", tangential=REFERENCE_TANGENTIAL))
     b.add_material(wd.GRAVEL)
     pos = _lattice(27, 1.98 * R, (-0.0125, -0.0125, 0.0068), rng, 5e-5)
     b.add_spheres(pos, R * rng.uniform(0.9, 1.1, 27), "gravel", velocities=rng.normal(0.0, 0.1, (27, 3)) + (0.0, 0.0, -0.3),
@@ -87,7 +91,7 @@ def scene_cohesion_epsd2() -> wd.Simulation:
 def scene_wear() -> wd.Simulation:
     """Spheres thrown onto a translating, finely subdivided plate: per-triangle wear."""
     rng = np.random.default_rng(4)
-    b = wd.ModelBuilder()
+    b = wd.ModelBuilder(contact_law=wd.ContactLaw(tangential=REFERENCE_TANGENTIAL))
     b.add_material(wd.GRAVEL)
     pos = _lattice(12, 2.5 * R, (-0.01, -0.01, 1.2 * R), rng, 2e-4)
     b.add_spheres(pos, R, "gravel", velocities=np.column_stack([rng.uniform(0.2, 0.6, 12), np.zeros(12),
@@ -102,7 +106,7 @@ def scene_no_walls() -> wd.Simulation:
     """A model without walls (the wall stages are skipped): clumps and spheres of two worlds
     colliding in free space with epsd rolling resistance."""
     rng = np.random.default_rng(5)
-    b = wd.ModelBuilder(num_worlds=2, contact_law=wd.ContactLaw(rolling="epsd"), gravity=(0.0, 0.0, 0.0))
+    b = wd.ModelBuilder(num_worlds=2, contact_law=wd.ContactLaw(rolling="epsd", tangential=REFERENCE_TANGENTIAL), gravity=(0.0, 0.0, 0.0))
     b.add_material(wd.GRAVEL)
     offsets = np.array([[-0.5 * R, 0.0, 0.0], [0.5 * R, 0.0, 0.0]])
     mass = 2.0 * wd.GRAVEL.density * 4.0 / 3.0 * math.pi * (0.8 * R) ** 3

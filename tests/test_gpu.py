@@ -86,9 +86,10 @@ def test_cuda_clumps_match_cpu(clump_damping_mass):
     np.testing.assert_allclose(run("cuda"), run("cpu"), atol=5e-5)
 
 
-@pytest.mark.parametrize("law", [dict(rolling="epsd2", cohesion="sjkr"), dict(rolling="epsd", cohesion="sjkr2")])
+@pytest.mark.parametrize("law", [dict(rolling="epsd2", cohesion="sjkr"), dict(rolling="epsd", cohesion="sjkr2"),
+                                 dict(rolling="epsd2", cohesion="sjkr", tangential="mindlin")])
 def test_cuda_effects_match_cpu(law):
-    """The new effect sub-models (LIGGGHTS epsd2 rolling, SJKR cohesion) give the CPU's physics on CUDA."""
+    """The effect sub-models (LIGGGHTS epsd2 rolling, SJKR cohesion; both tangential rules) give the CPU's physics on CUDA."""
     needs_cuda()
 
     def run(device):

@@ -66,8 +66,8 @@ def with_response_change(raw: dict, **change) -> dict:
 
 CHANGES = {
     "contact law": ({**BASE, "contact_law": {"rolling": "epsd2"}},
-                    "contact law differs: recorded hertz+mindlin+rolling:epsd+cohesion:none, "
-                    "config hertz+mindlin+rolling:epsd2+cohesion:none"),
+                    "contact law differs: recorded hertz+history+rolling:epsd+cohesion:none, "
+                    "config hertz+history+rolling:epsd2+cohesion:none"),
     "material": ({**BASE, "material": {"type": "spheres", "diameter": [0.010, 0.012]}},
                  "material differs: recorded the experiment's scale default, config {"),
     "experiment setting": (with_response_change(BASE, settings={"lift_speed": 0.05}),

@@ -35,7 +35,7 @@ class ContactLaw:
     """
 
     normal: str = "hertz"
-    tangential: str = "mindlin"
+    tangential: str = "history"
     rolling: str = "none"
     cohesion: str = "none"
     track_wear: bool = True
