@@ -165,10 +165,10 @@ def _prefetch(keys: Sequence[str], space, cands, forward, settings, which: Seque
         if merged:  # one model holds every version: all designs in one launch per experiment
             doc = {"prefetched": call["versions"], "sets": call["sets"], "replicates": call["replicates"],
                    "superset": True, "wall_s": round(time.perf_counter() - t0, 1),
-                   "dem_worlds_run": forward.dem_worlds, "launches": forward.log}
+                   "dem_worlds_run": getattr(forward, "dem_worlds", None), "launches": getattr(forward, "log", None)}
         else:
             doc = {"prefetched": call["versions"][0], "sets": call["sets"], "replicates": call["replicates"],
-                   "wall_s": round(call["seconds"], 1), "dem_worlds_run": forward.dem_worlds}
+                   "wall_s": round(call["seconds"], 1), "dem_worlds_run": getattr(forward, "dem_worlds", None)}
         print(json.dumps(doc), flush=True)
 
     run_planned_designs(ForwardRunner(forward), keys, space, cands, settings, list(which) or None, line)
