@@ -5,7 +5,10 @@ against the engine's declarations before any DEM runs, builds the DEM forward mo
 (:mod:`validation.dem_forward`) and the candidate effects (:mod:`validation.dem_effects`), runs
 :func:`validation.diagnose.diagnose` and writes ``diagnosis.json``, the figures and
 ``report.html`` to the output folder. DEM runs are cached in ``dem_runs.jsonl`` there: an
-interrupted diagnosis resumes where it stopped.
+interrupted diagnosis resumes where it stopped. With ``diagnosis: {designs_up_front: auto}`` (the
+default) a run on a CUDA device first runs every design that does not depend on the data in one
+launch per experiment (``--prefetch`` makes that same call and stops); ``dem_timing.json``
+records it.
 """
 from __future__ import annotations
 
