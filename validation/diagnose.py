@@ -6,10 +6,12 @@
    answers every model version in one call), every design :func:`planned_designs` lists -- the
    base model's and each first-round candidate's -- in ONE forward-model call
    (:func:`run_planned_designs`, also behind ``warpdem diagnose --prefetch``); the studies below
-   take their designs from its answer. Same designs, same seeds, same numbers; fewer, larger
-   calls (on a GPU one launch of N + M worlds costs far less than launches of N and of M). If the
-   base model then needs no ranking, the candidates' designs were run for nothing: a progress
-   line and ``forward_model.designs_up_front`` in the result say how many worlds;
+   take their designs from its answer. Same designs, seeds and parameter sets, so the same numbers
+   from a model whose runs do not depend on when they are made (the DEM numbers a new world's fill
+   in run order: ``docs/diagnosis.md``); fewer, larger calls (on a GPU one launch of N + M worlds
+   should cost much less than a launch of N and one of M). If the base model then needs no
+   ranking, the candidates' designs were run for nothing: a progress line and
+   ``forward_model.designs_up_front`` in the result say how many worlds;
 1. the base model's study (:mod:`validation.study`: design, DEM noise, surrogates, best fit,
    comparison, adequacy, evidence, DEM confirmation);
 2. if the base model is inadequate (or ``rank_when_adequate``), every candidate effect's
@@ -250,10 +252,6 @@ class PlannedRun:
     designs: dict[str, DesignData]
     calls: list[dict[str, Any]]
     merged: bool
-
-    @property
-    def sets(self) -> int:
-        return sum(len(d.X) for d in self.designs.values())
 
 
 def run_planned_designs(runner: ForwardRunner, keys: Sequence[str], base_space: ParameterSpace,
