@@ -88,6 +88,8 @@ CASES: list[tuple[str, Callable, Any, list[str], list[str]]] = [
     ("diag-reversed-bounds", diagnose_main, edited(DIAGNOSIS, "parameters.mu_s_pp", [0.9, 0.1]), [], ["mu_s_pp"]),
     ("diag-settings-typo", diagnose_main, edited(DIAGNOSIS, "diagnosis.replicate", 2), [], ["replicate"]),
     ("diag-unknown-add", diagnose_main, DIAGNOSIS, ["--add", "magnetism"], ["magnetism"]),
+    ("diag-bad-designs-up-front", diagnose_main, edited(DIAGNOSIS, "diagnosis.designs_up_front", "sometimes"), [],
+     ["diagnosis.designs_up_front", "auto, true or false"]),
     # warpdem pump
     ("pump-missing-file", pump_main, None, [], ["nope.yaml"]),
     ("pump-unknown-key", pump_main, {**PUMP, "fluidd": {}}, [], ["fluidd"]),

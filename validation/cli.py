@@ -5,7 +5,10 @@ against the engine's declarations before any DEM runs, builds the DEM forward mo
 (:mod:`validation.dem_forward`) and the candidate effects (:mod:`validation.dem_effects`), runs
 :func:`validation.diagnose.diagnose` and writes ``diagnosis.json``, the figures and
 ``report.html`` to the output folder. DEM runs are cached in ``dem_runs.jsonl`` there: an
-interrupted diagnosis resumes where it stopped.
+interrupted diagnosis resumes where it stopped. With ``diagnosis: {designs_up_front: auto}`` (the
+default) a run on a CUDA device first runs every design that does not depend on the data in one
+launch per experiment (``--prefetch`` makes that same call and stops); ``dem_timing.json``
+records it.
 """
 from __future__ import annotations
 
@@ -147,40 +150,31 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
 
 
 def _prefetch(keys: Sequence[str], space, cands, forward, settings, which: Sequence[str]) -> int:
-    """Run (into the cache) the designs :func:`validation.diagnose.planned_designs` lists."""
-    from calibration.designs import latin_hypercube
+    """Run (into the cache) the designs :func:`validation.diagnose.planned_designs` lists, with
+    :func:`validation.diagnose.run_planned_designs` (the diagnosis's ``designs_up_front`` step):
+    one call for every version with a superset model, else one call per version. One JSON line per call."""
+    from .diagnose import planned_designs, run_planned_designs, version_name
+    from .forward import ForwardRunner, merges_versions
 
-    from .diagnose import planned_designs
-    from .forward import ForwardRunner
-
-    plans = planned_designs(space, cands, settings)
-    names = {("base" if not v.effects else v.effects[-1].name): (v, n, seed) for v, n, seed in plans}
-    unknown = sorted(set(which) - set(names))
+    valid = [version_name(v) for v, _, _ in planned_designs(space, cands, settings)]
+    unknown = sorted(set(which) - set(valid))
     if unknown:
-        print(f"warpdem diagnose: --prefetch: unknown version(s) {unknown}; valid: {sorted(names)}", file=sys.stderr)
+        print(f"warpdem diagnose: --prefetch: unknown version(s) {unknown}; valid: {sorted(valid)}", file=sys.stderr)
         return 2
-    runner = ForwardRunner(forward)
-    chosen = list(which or names)
     t0 = time.perf_counter()
-    if getattr(forward, "superset", False):
-        # one model holds every version: all designs in one launch per experiment
-        sets = []
-        for name in chosen:
-            v, n, seed = names[name]
-            sets += [forward.padded(v.effect_names, p) for p in v.parameter_sets(latin_hypercube(v.space, n, seed=seed))]
-        runner(tuple(forward.effects), sets, settings.replicates, tuple(keys))
-        print(json.dumps({"prefetched": chosen, "sets": len(sets), "replicates": settings.replicates, "superset": True,
-                          "wall_s": round(time.perf_counter() - t0, 1), "dem_worlds_run": forward.dem_worlds,
-                          "launches": forward.log}), flush=True)
-        return 0
-    for name in chosen:
-        v, n, seed = names[name]
-        t1 = time.perf_counter()
-        X = latin_hypercube(v.space, n, seed=seed)
-        runner(v.effect_names, v.parameter_sets(X), settings.replicates, tuple(keys))
-        print(json.dumps({"prefetched": name, "sets": n, "replicates": settings.replicates,
-                          "wall_s": round(time.perf_counter() - t1, 1), "dem_worlds_run": forward.dem_worlds}),
-              flush=True)
+    merged = merges_versions(forward)
+
+    def line(call: dict) -> None:
+        if merged:  # one model holds every version: all designs in one launch per experiment
+            doc = {"prefetched": call["versions"], "sets": call["sets"], "replicates": call["replicates"],
+                   "superset": True, "wall_s": round(time.perf_counter() - t0, 1),
+                   "dem_worlds_run": getattr(forward, "dem_worlds", None), "launches": getattr(forward, "log", None)}
+        else:
+            doc = {"prefetched": call["versions"][0], "sets": call["sets"], "replicates": call["replicates"],
+                   "wall_s": round(call["seconds"], 1), "dem_worlds_run": getattr(forward, "dem_worlds", None)}
+        print(json.dumps(doc), flush=True)
+
+    run_planned_designs(ForwardRunner(forward), keys, space, cands, settings, list(which) or None, line)
     return 0
 
 
@@ -197,7 +191,8 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--prefetch", nargs="*", metavar="VERSION",
                     help="only run the designs the diagnosis needs before it sees the data (the base model and "
                          "each candidate; name some, e.g. 'base rolling_resistance', to split them over processes) "
-                         "into the DEM cache, then stop")
+                         "into the DEM cache, then stop: the same merged call as the diagnosis's designs_up_front "
+                         "step")
     ap.add_argument("--experiments", nargs="+", metavar="EXPERIMENT",
                     help="with --prefetch: only these experiments' observables (one launch each), e.g. to keep "
                          "each call of a time-limited GPU machine to one experiment")
@@ -258,7 +253,8 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
         paths = result.write(out)
         timing = {"wall_s": wall, "dem_s": round(forward.dem_seconds, 1), "dem_worlds_run": forward.dem_worlds,
                   "dem_launches": forward.log, "merged_requests": pool.merges,
-                  "diagnoses_in_this_process": [str(j[0]) for j in jobs], "device": str(forward.device or "default")}
+                  "diagnoses_in_this_process": [str(j[0]) for j in jobs], "device": str(forward.device or "default"),
+                  "designs_up_front": result.forward.get("designs_up_front")}
         (out / "dem_timing.json").write_text(json.dumps(timing, indent=1))
         if len(jobs) > 1:
             print(f"{path}:")

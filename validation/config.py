@@ -23,7 +23,8 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
     effect_ranges: {mu_r_pp: [0, 0.3]}    # design range of an effect parameter (default: declared)
     add: []                           # effects to add whatever the ranking (--add EFFECT)
     proposals: auto                   # conditions to forecast when candidates tie, or a list
-    diagnosis: {replicates: 2}        # validation.settings.DiagnosisSettings fields
+    diagnosis: {replicates: 2}        # validation.settings.DiagnosisSettings fields, e.g.
+                                      # designs_up_front: auto (true | false): every design in one call
 """
 from __future__ import annotations
 
@@ -79,6 +80,16 @@ class DiagnosisSection(_Strict):
     gp_restarts: int = Field(2, ge=0)
     cv_folds: int = Field(5, ge=2)
     seed: int = Field(0, ge=0)
+    designs_up_front: Union[bool, Literal["auto"]] = "auto"
+
+    @field_validator("designs_up_front", mode="before")
+    @classmethod
+    def _auto_true_false(cls, v: Any) -> Any:
+        if isinstance(v, bool) or v == "auto":
+            return v
+        if v in ("true", "false"):  # quoted in the YAML
+            return v == "true"
+        raise ValueError("must be auto, true or false")
 
 
 class DiagnosisConfig(_Strict):

@@ -240,11 +240,8 @@ class DEMForwardModel(ForwardModel):
                 fh.write(json.dumps(rec) + "\n")
 
     # ------------------------------------------------------------------ evaluate
-    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
-                 keys: Sequence[str]) -> np.ndarray:
-        out = np.full((len(parameter_sets), replicates, len(keys)), np.nan)
-        parameter_sets = [self.padded(effects, ps) for ps in parameter_sets]
-        # group keys by (experiment, settings without rpm): one run each, rpm per world
+    def _groups(self, keys: Sequence[str]) -> dict[tuple[str, str], list[int]]:
+        """Key indices by (experiment, settings without rpm): one run each, the rpm per world."""
         groups: dict[tuple[str, str], list[int]] = {}
         for k_i, key in enumerate(keys):
             if key not in self.observables:
@@ -252,12 +249,36 @@ class DEMForwardModel(ForwardModel):
             o = self.observables[key]
             settings = {k: v for k, v in o.settings.items() if k != "rpm"}
             groups.setdefault((o.experiment, json.dumps(settings, sort_keys=True, default=str)), []).append(k_i)
-        for (exp_name, settings_json), k_idx in groups.items():
+        return groups
+
+    def _rpms(self, keys: Sequence[str], k_idx: Sequence[int]) -> list:
+        return sorted({self.observables[keys[k]].settings.get("rpm") for k in k_idx},
+                      key=lambda v: -1 if v is None else float(v))
+
+    def worlds_per_run(self, keys: Sequence[str]) -> int:
+        """DEM worlds one (parameter set, fill) of ``keys`` takes: one per experiment condition and
+        drum speed (e.g. 5 for a baffle test, the drum at 3 speeds and a cylinder lift)."""
+        return sum(len(self._rpms(keys, k_idx)) for k_idx in self._groups(keys).values())
+
+    @property
+    def on_cuda(self) -> bool:
+        """True when the worlds run on a CUDA device (the given one, else Warp's preferred one)."""
+        dev = self.device
+        if dev is None:
+            import warp as wp
+
+            dev = wp.get_preferred_device()
+        return str(dev).startswith("cuda")
+
+    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
+                 keys: Sequence[str]) -> np.ndarray:
+        out = np.full((len(parameter_sets), replicates, len(keys)), np.nan)
+        parameter_sets = [self.padded(effects, ps) for ps in parameter_sets]
+        for (exp_name, settings_json), k_idx in self._groups(keys).items():
             settings = json.loads(settings_json)
             desc = self.description(effects, exp_name)
             model_fp = _fingerprint(desc.describe())
-            rpms = sorted({self.observables[keys[k]].settings.get("rpm") for k in k_idx},
-                          key=lambda v: -1 if v is None else float(v))
+            rpms = self._rpms(keys, k_idx)
             exp_fp = _fingerprint([exp_name, self.scale, self.experiment_settings.get(exp_name, {}), settings,
                                    self.fixed])
             todo: list[tuple[int, int, Any, str]] = []

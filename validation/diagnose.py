@@ -2,6 +2,16 @@
 
 :func:`diagnose` runs, in order (issue 11):
 
+0. with ``designs_up_front`` on (``auto``: when the forward model runs on a CUDA device and
+   answers every model version in one call), every design :func:`planned_designs` lists -- the
+   base model's and each first-round candidate's -- in ONE forward-model call
+   (:func:`run_planned_designs`, also behind ``warpdem diagnose --prefetch``); the studies below
+   take their designs from its answer. Same designs, seeds and parameter sets, so the same numbers
+   from a model whose runs do not depend on when they are made (the DEM numbers a new world's fill
+   in run order: ``docs/diagnosis.md``); fewer, larger calls (on a GPU one launch of N + M worlds
+   should cost much less than a launch of N and one of M). If the base model then needs no
+   ranking, the candidates' designs were run for nothing: a progress line and
+   ``forward_model.designs_up_front`` in the result say how many worlds;
 1. the base model's study (:mod:`validation.study`: design, DEM noise, surrogates, best fit,
    comparison, adequacy, evidence, DEM confirmation);
 2. if the base model is inadequate (or ``rank_when_adequate``), every candidate effect's
@@ -43,11 +53,12 @@ from typing import Any, Sequence
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from calibration.designs import ParameterSpace
+from calibration.designs import ParameterSpace, latin_hypercube
 
+from .design import DesignData, evaluate_sets
 from .discrimination import Discrimination, discriminate
 from .effects import CandidateEffect, ModelVersion
-from .forward import ForwardModel, ForwardRunner
+from .forward import ForwardModel, ForwardRunner, merges_versions, runs_on_cuda, worlds_per_run
 from .history import ErrorHistory, VersionErrors, version_errors
 from .observables import Observable, Observations
 from .pooled import run_as_workers
@@ -55,7 +66,8 @@ from .ranking import CandidateResult, candidate_sentence, effect_signature, rank
 from .settings import DiagnosisSettings
 from .study import ModelStudy, refine_study, study_model
 
-__all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs"]
+__all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs", "run_planned_designs",
+           "PlannedRun", "version_name"]
 
 
 @dataclass(frozen=True)
@@ -223,10 +235,95 @@ def planned_designs(base_space: ParameterSpace, candidates: Sequence[CandidateEf
     return out
 
 
+def version_name(version: ModelVersion) -> str:
+    """How a planned design is named (``--prefetch NAME``): ``"base"``, else its last effect's name."""
+    return "base" if not version.effects else version.effects[-1].name
+
+
+@dataclass
+class PlannedRun:
+    """What :func:`run_planned_designs` ran.
+
+    designs : per version name (:func:`version_name`), its design (the Latin hypercube and the answers).
+    calls : one entry per forward-model call: the versions it held, sets, replicates, seconds.
+    merged : True when every version went into one call (a model of the superset protocol).
+    """
+
+    designs: dict[str, DesignData]
+    calls: list[dict[str, Any]]
+    merged: bool
+
+
+def run_planned_designs(runner: ForwardRunner, keys: Sequence[str], base_space: ParameterSpace,
+                        candidates: Sequence[CandidateEffect], settings: DiagnosisSettings,
+                        versions: Sequence[str] | None = None, after_call: Any = None) -> PlannedRun:
+    """Run the designs :func:`planned_designs` lists (those named in ``versions``, default all) for
+    ``keys``: in ONE call of the forward model when it answers every model version in one call
+    (:func:`validation.forward.merges_versions`: the DEM's superset model, one launch per
+    experiment), else one call per version. The designs are exactly those the studies of
+    :func:`diagnose` draw (same sizes and seeds), so a study given one (``study_model(...,
+    design=...)``) or finding its worlds in the model's cache computes what it would have computed
+    alone. Used by the ``designs_up_front`` step of :func:`diagnose` and by ``warpdem diagnose
+    --prefetch``. ``after_call(entry)`` is called after each call (its entry of
+    :attr:`PlannedRun.calls`). Unknown version names raise ValueError naming the valid ones."""
+    plans = planned_designs(base_space, candidates, settings)
+    named = {version_name(v): (v, n, seed) for v, n, seed in plans}
+    unknown = [w for w in (versions or ()) if w not in named]
+    if unknown:
+        raise ValueError(f"unknown version(s) {unknown}; valid: {sorted(named)}")
+    chosen = [w for w in named if not versions or w in versions]
+    keys = tuple(keys)
+    X = {w: latin_hypercube(named[w][0].space, named[w][1], seed=named[w][2]) for w in chosen}
+    model = runner.model
+    designs: dict[str, DesignData] = {}
+    calls: list[dict[str, Any]] = []
+
+    def record(names: list[str], n_sets: int, t0: float) -> None:
+        calls.append({"versions": names, "sets": n_sets, "replicates": settings.replicates,
+                      "seconds": time.perf_counter() - t0})
+        if after_call is not None:
+            after_call(calls[-1])
+
+    if merges_versions(model):
+        sets: list[dict[str, float]] = []
+        spans: dict[str, tuple[int, int]] = {}
+        for w in chosen:
+            v = named[w][0]
+            start = len(sets)
+            sets += [model.padded(v.effect_names, p) for p in v.parameter_sets(X[w])]
+            spans[w] = (start, len(sets))
+        t0 = time.perf_counter()
+        Y = runner(tuple(model.effects), sets, settings.replicates, keys)
+        for w, (a, b) in spans.items():
+            designs[w] = DesignData(X[w], Y[a:b], keys)
+        record(chosen, len(sets), t0)
+        return PlannedRun(designs, calls, True)
+    for w in chosen:
+        t0 = time.perf_counter()
+        designs[w] = evaluate_sets(named[w][0], runner, keys, X[w], settings.replicates)
+        record([w], len(X[w]), t0)
+    return PlannedRun(designs, calls, False)
+
+
+def _up_front_choice(settings: DiagnosisSettings, model: ForwardModel) -> tuple[bool, str]:
+    """Whether the designs run up front (``settings.designs_up_front``), and why."""
+    want = settings.designs_up_front
+    if want is False:
+        return False, "designs_up_front: false"
+    if not merges_versions(model):
+        return False, ("the forward model cannot answer every model version in one call (no superset model): "
+                       "each study requests its own design")
+    if want == "auto":
+        return (True, "auto: the forward model runs on a CUDA device") if runs_on_cuda(model) else \
+            (False, "auto: the forward model does not run on a CUDA device")
+    return True, "designs_up_front: true"
+
+
 def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs: Observations, runner: ForwardRunner,
                 model: ForwardModel, settings: DiagnosisSettings, seed: int,
-                noise: tuple[np.ndarray, np.ndarray]) -> RankingRound:
-    """Study every candidate on top of ``current``, rank, detect a tie and try to resolve it."""
+                noise: tuple[np.ndarray, np.ndarray], designs: dict[str, DesignData] | None = None) -> RankingRound:
+    """Study every candidate on top of ``current``, rank, detect a tie and try to resolve it.
+    ``designs`` : candidates' designs already run (by effect name; the up-front step)."""
     labels = [o.name for o in obs]
     z_now = _residual(current)
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
@@ -235,7 +332,8 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     _say(f"studying {len(candidates)} candidate(s): {', '.join(e.name for e in candidates)}")
     studies = run_as_workers(runner.model, [
         (lambda i=i, eff=eff: study_model(current.version.with_effect(eff), obs, runner, settings,
-                                          _candidate_seed(seed, i), noise=noise))
+                                          _candidate_seed(seed, i), design=(designs or {}).get(eff.name),
+                                          noise=noise))
         for i, eff in enumerate(candidates)])
     results = []
     for eff, st in zip(candidates, studies):
@@ -315,8 +413,11 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     runner = ForwardRunner(forward_model)
     t_start = time.perf_counter()
     seconds: dict[str, float] = {}
+    up_front, designs = _designs_up_front(obs, base_space, cands, forward_model, runner, settings)
+    if "seconds" in up_front:
+        seconds["designs_up_front"] = up_front["seconds"]
     _say("studying the base model")
-    base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed)
+    base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed, design=designs.get("base"))
     if base.adequacy.adequate and not (base.check.agrees or base.check.dem_within) and settings.max_refine_waves > 1:
         _say(f"the base model's surrogate disagrees with the DEM at its best fit "
              f"({', '.join(base.check.disagreeing)}): refining")
@@ -338,7 +439,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
             break
         t0 = time.perf_counter()
         rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, _round_seed(settings, step),
-                          base_noise)
+                          base_noise, designs if step == 0 else None)
         seconds["ranking"] += time.perf_counter() - t0
         top = rnd.top
         if forced:
@@ -369,11 +470,53 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         versions.append(recal)
         history = history.appended(_errors(recal, settings))
         remaining = [c for c in remaining if c.name != chosen]
+    if up_front["on"]:
+        _designs_used(up_front, ["base"] + ([c.name for c in cands] if rounds else []))
     seconds["total"] = time.perf_counter() - t_start
     seconds["forward_model"] = runner.seconds
     met, headline, details, steps = _summarise(versions, rounds, history, settings)
     return DiagnosisResult(obs, settings, versions, rounds, history, met, headline, details, steps,
-                           runner.to_dict(), seconds, cands)
+                           {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands)
+
+
+def _designs_up_front(obs: Observations, base_space: ParameterSpace, cands: tuple[CandidateEffect, ...],
+                      model: ForwardModel, runner: ForwardRunner,
+                      settings: DiagnosisSettings) -> tuple[dict[str, Any], dict[str, DesignData]]:
+    """Stage 0 (module docstring): the record for ``forward_model.designs_up_front`` and the designs
+    by version name (none when off). The candidates' designs are included only when a ranking round
+    can happen (``max_added_effects`` or ``add``)."""
+    on, why = _up_front_choice(settings, model)
+    record: dict[str, Any] = {"setting": settings.designs_up_front, "on": on, "reason": why}
+    if not on:
+        if settings.designs_up_front is True:
+            _say(f"designs_up_front: true, but {why}")
+        return record, {}
+    names = ["base"]
+    if cands and max(settings.max_added_effects, len(settings.add)) > 0:
+        names += [c.name for c in cands]
+    per_run = worlds_per_run(model, obs.keys)
+    _say(f"running the designs of {', '.join(names)} up front, in one forward-model call ({why})")
+    t0 = time.perf_counter()
+    run = run_planned_designs(runner, obs.keys, base_space, cands, settings, names)
+    record.update({
+        "calls": len(run.calls), "replicates": settings.replicates, "worlds_per_run": per_run,
+        "sets": {w: len(d.X) for w, d in run.designs.items()},
+        "worlds": {w: len(d.X) * settings.replicates * per_run for w, d in run.designs.items()},
+        "seconds": time.perf_counter() - t0})
+    return record, run.designs
+
+
+def _designs_used(record: dict[str, Any], used: Sequence[str]) -> None:
+    """Complete the up-front record with the worlds the diagnosis used; say so when some were wasted."""
+    worlds = record["worlds"]
+    unused = [w for w in worlds if w not in used]
+    record["worlds_run"] = sum(worlds.values())
+    record["worlds_used"] = sum(n for w, n in worlds.items() if w in used)
+    record["unused_versions"] = unused
+    if unused:
+        _say(f"the base model needs no ranking, so the {record['worlds_run'] - record['worlds_used']} design "
+             f"world(s) of {', '.join(unused)} run up front were not used ({record['worlds_used']} of "
+             f"{record['worlds_run']} were; designs_up_front: {str(record['setting']).lower()})")
 
 
 def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: ErrorHistory,

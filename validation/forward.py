@@ -4,6 +4,19 @@ One call of :meth:`ForwardModel.evaluate` is one batched launch per experiment: 
 set times every replicate (an independent fill) runs as its own world.  The diagnosis never sees
 DEM objects, only numbers, so it is tested in seconds with an analytic model.
 
+Optional, duck-typed capabilities (a model without them is served as before):
+
+* the **superset protocol**: ``superset = True``, ``effects`` (every candidate effect's name, in
+  order) and ``padded(effects, parameter_set)`` (the set with each effect not in ``effects`` at its
+  "off" value). The model promises that ``evaluate(tuple(model.effects), [padded(e, p)], ...)``
+  answers exactly what ``evaluate(e, [p], ...)`` does, so the designs of every model version can
+  share one call (:func:`merges_versions`; used by :mod:`validation.pooled` and by the
+  ``designs_up_front`` step of :func:`validation.diagnose.diagnose`).
+* ``on_cuda``: True when the model simulates on a CUDA device (:func:`runs_on_cuda`; decides
+  ``designs_up_front: auto``).
+* ``worlds_per_run(keys)``: simulations one (parameter set, fill) of ``keys`` takes (the DEM: one
+  world per experiment condition and drum speed); 1 when absent.
+
 :class:`ForwardRunner` wraps a model: it checks each answer's shape, counts runs and time.
 """
 
@@ -19,7 +32,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["ForwardModel", "ProposedMeasurement", "ForwardRunner"]
+__all__ = ["ForwardModel", "ProposedMeasurement", "ForwardRunner", "merges_versions", "runs_on_cuda",
+           "worlds_per_run"]
 
 
 @dataclass(frozen=True)
@@ -123,3 +137,21 @@ class ForwardRunner:
 
     def to_dict(self) -> dict[str, Any]:
         return {"calls": self.calls, "runs": self.runs, "failed_runs": self.failed_runs, "seconds": self.seconds}
+
+
+def merges_versions(model: Any) -> bool:
+    """True when ``model`` follows the superset protocol (module docstring): the designs of every
+    model version can go into one call of it."""
+    return (bool(getattr(model, "superset", False)) and getattr(model, "effects", None) is not None
+            and callable(getattr(model, "padded", None)))
+
+
+def runs_on_cuda(model: Any) -> bool:
+    """True when ``model`` says it simulates on a CUDA device (``on_cuda``); False when it does not say."""
+    return bool(getattr(model, "on_cuda", False))
+
+
+def worlds_per_run(model: Any, keys: Sequence[str]) -> int:
+    """Simulations one (parameter set, fill) of ``keys`` takes in ``model`` (1 unless it says)."""
+    f = getattr(model, "worlds_per_run", None)
+    return int(f(tuple(keys))) if callable(f) else 1

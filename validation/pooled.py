@@ -9,6 +9,9 @@ ask at the same time. A request waits until every live worker is waiting; then t
 all of them are merged into one call of the underlying model (with a superset model, see
 :class:`validation.dem_forward.DEMForwardModel`, that is one launch per experiment for every
 model version) and each worker reads its own answer back (from the model's cache).
+The designs a diagnosis runs up front (``designs_up_front``, :func:`validation.diagnose.diagnose`)
+are its first request, so those of several measurement sets go into one call, where the designs
+they share (the same model, settings and seeds) run once.
 
 The pooling is deterministic: a merged call holds exactly the requests that the live workers
 make before they next wait, whatever the threads' timing, so a pooled run reproduces itself.

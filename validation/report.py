@@ -186,8 +186,12 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
         *_refinement_blocks(result, w, cut),
     ]))
     f = result.forward
-    footer = (f"warpdem diagnosis · forward model: {f['calls']} calls, {f['runs']} runs ({f['failed_runs']} failed), "
-              f"{f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · every number is in diagnosis.json")
+    up = f.get("designs_up_front") or {}
+    up_words = (f" (designs up front in one call: {up['worlds_used']} of {up['worlds_run']} worlds used)"
+                if up.get("on") and "worlds_run" in up else "")
+    footer = (f"warpdem diagnosis · forward model: {f['calls']} calls{up_words}, {f['runs']} runs "
+              f"({f['failed_runs']} failed), {f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · "
+              "every number is in diagnosis.json")
     return Report(title="Model versus measurement: diagnosis", verdict=verdict, sections=sections,
                   next_steps=result.next_steps,
                   subtitle=f"{len(obs)} observables · base parameters: {', '.join(base.version.space.names)} · "

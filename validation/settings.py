@@ -46,6 +46,18 @@ class DiagnosisSettings:
     max_conflict_size : largest observable subset searched for conflicts.
     gp_restarts, cv_folds : surrogate hyperparameter restarts and cross-validation folds.
     seed : seed of every design, scan and sample.
+    designs_up_front : ``"auto"``, True or False. On: before the base study, every design
+        :func:`validation.diagnose.planned_designs` lists (the base model and each candidate of the
+        first ranking round) is requested in ONE call of the forward model (one launch per
+        experiment for the DEM), and the studies take their designs from its answer. Only a
+        forward model that answers every model version in one call takes part (the superset
+        protocol of :class:`validation.forward.ForwardModel`); with another model the setting does
+        nothing. The result's numbers are those of a run with it off; only the number and size of
+        forward-model calls change (and, when the base model turns out adequate, the candidates'
+        designs were run for nothing: the result's ``forward_model.designs_up_front`` says how
+        many). ``"auto"``: on when the forward model runs on a CUDA device, where one launch of
+        N + M worlds costs far less than launches of N and of M; off on the CPU, where the worlds
+        cost the same either way and an adequate base model would waste the candidates' designs.
     """
 
     design_points_per_parameter: int = 8
@@ -68,6 +80,7 @@ class DiagnosisSettings:
     gp_restarts: int = 2
     cv_folds: int = 5
     seed: int = 0
+    designs_up_front: bool | str = "auto"
 
     def __post_init__(self) -> None:
         _int("design_points_per_parameter", self.design_points_per_parameter, 1)
@@ -87,6 +100,9 @@ class DiagnosisSettings:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"DiagnosisSettings.{name} must be a positive number, got {v!r}")
+        v = self.designs_up_front
+        if not (isinstance(v, bool) or (isinstance(v, str) and v == "auto")):
+            raise ValueError(f"DiagnosisSettings.designs_up_front must be 'auto', True or False, got {v!r}")
         if isinstance(self.add, str):
             raise ValueError(f"DiagnosisSettings.add must be a tuple of effect names, got the string {self.add!r}")
         object.__setattr__(self, "add", tuple(self.add))
