@@ -8,7 +8,8 @@
 # Phases, in order:
 #   1. pytest -m gpu tests/test_gpu.py -k layout   (each lever against the default on CUDA, with the graph)
 #   2. settled bed at SPHERES spheres, settled once (--settle-time SETTLE_TIME) and saved; then from that
-#      State: default, each lever alone, all levers, default again (drift check)
+#      State: default, each lever alone, all levers, default again (drift check), one process each;
+#      then all five interleaved in one process (levers_ab.py, 10 rounds of 200 steps)
 #   3. step_cost.py (small drum models): default and all levers
 #   4. profile_step.py (per-kernel times) from the saved State: default and all levers
 # Output: OUT/levers_gpu.jsonl (one JSON line per result, with "variant" added, and one "phase" line
@@ -83,6 +84,11 @@ if [ -f "$state" ]; then
     # shellcheck disable=SC2086  # the lever flags are words
     phase settled_bed "$v" 120 30 $py $bed --load-state "$state" ${LEVER[$v]}
   done
+fi
+
+# 2b. the same variants interleaved in one process (rounds of 200 steps; less noise)
+if [ -f "$state" ]; then
+  phase levers_ab interleaved 150 45 $py benchmarks/levers_ab.py --spheres "$spheres" --device "$device" --load-state "$state"
 fi
 
 # 3. small models, many steps
