@@ -42,7 +42,8 @@ if ! $py -c "import warp, trimesh" >> "$log" 2>&1; then
   echo "levers_gpu.sh: warp-lang and trimesh are not importable (carry them as wheels in .whl)" | tee -a "$log" >&2
   exit 2
 fi
-command -v nvidia-smi > /dev/null && nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv >> "$log" 2>&1
+command -v nvidia-smi > /dev/null \
+  && nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv >> "$log" 2>&1
 
 ALL="--neighbour-layout slot_major --history-layout slot_major --fused-placement"
 declare -A LEVER=(
@@ -59,7 +60,7 @@ phase() {
   local name=$1 variant=$2 limit=$3 estimate=$4
   shift 4
   if [ $((SECONDS + estimate)) -gt "$budget" ]; then
-    echo "{\"phase\": \"$name\", \"variant\": \"$variant\", \"skipped\": \"budget: ${SECONDS} s of ${budget} s spent\"}" \
+    echo "{\"phase\": \"$name\", \"variant\": \"$variant\", \"skipped\": \"budget: ${SECONDS} of ${budget} s\"}" \
       | tee -a "$jsonl"
     return
   fi
@@ -91,7 +92,8 @@ fi
 
 # 2b. the same variants interleaved in one process (rounds of 200 steps; less noise)
 if [ -f "$state" ]; then
-  phase levers_ab interleaved 150 45 $py benchmarks/levers_ab.py --spheres "$spheres" --device "$device" --load-state "$state"
+  phase levers_ab interleaved 150 45 $py benchmarks/levers_ab.py --spheres "$spheres" --device "$device" \
+    --load-state "$state"
 fi
 
 # 3. small models, many steps

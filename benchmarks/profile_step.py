@@ -25,8 +25,8 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE,
-                            NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
+                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
 
 from settled_bed import build, load_settled_state, min_bytes_per_sphere_step  # noqa: E402  (run from benchmarks/)
 from step_cost import kernel_breakdown  # noqa: E402
@@ -72,7 +72,8 @@ def main(argv=None):
     ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
                     help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
     ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help=f"Verlet list entry k of sphere i at i * capacity + k or k * n + i (default {DEFAULT_NEIGHBOUR_LAYOUT})")
+                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
+                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
     ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
                     help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
     ap.add_argument("--fused-placement", action="store_true",
@@ -140,8 +141,9 @@ def main(argv=None):
     bytes_per_sphere = min_bytes_per_sphere_step(k_avg)
     ms = stages["full_step"]
     out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order,
-               neighbour_search=args.neighbour_search, wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
-               history_layout=args.history_layout, fused_placement=args.fused_placement,
+               neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
+               neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
+               fused_placement=args.fused_placement,
                state_from=args.load_state or f"{args.settle_time} s settled here", contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))

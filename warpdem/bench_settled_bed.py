@@ -32,8 +32,8 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
-from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE,
-                            NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
+                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
 
 D = 0.018
 R = D / 2
@@ -149,13 +149,16 @@ def main(argv=None) -> dict:
     ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
                     help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
     ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help=f"Verlet list entry k of sphere i at i * capacity + k or k * n + i (default {DEFAULT_NEIGHBOUR_LAYOUT})")
+                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
+                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
     ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
                     help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
     ap.add_argument("--fused-placement", action="store_true",
                     help="the integrator places the member spheres (no placement launch per step)")
-    ap.add_argument("--save-state", default=None, metavar="NPZ", help="save the settled State here (before the warm-up)")
-    ap.add_argument("--load-state", default=None, metavar="NPZ", help="start from this settled State instead of settling")
+    ap.add_argument("--save-state", default=None, metavar="NPZ",
+                    help="save the settled State here (before the warm-up)")
+    ap.add_argument("--load-state", default=None, metavar="NPZ",
+                    help="start from this settled State instead of settling")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
@@ -172,9 +175,9 @@ def main(argv=None) -> dict:
         t_settle = time.perf_counter() - t0
         seconds = time_steps(sim, device, args.warmup, args.steps)
     else:
+        save = (lambda t: save_settled_state(args.save_state, sim, t)) if args.save_state else None
         settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps,
-                                                             on_settled=(lambda t: save_settled_state(args.save_state, sim, t))
-                                                             if args.save_state else None)
+                                                             on_settled=save)
     ke = sim.kinetic_energy() / args.spheres
     counts = sim.state.contact_count.numpy()
     n_total = args.spheres * args.worlds

@@ -253,7 +253,8 @@ def build_neighbour_list_from_cells_kernel(layout: str = DEFAULT_SLOT_LAYOUT) ->
         if active != 0:
             reach = ri + spheres.max_radius + spheres.skin
             h = table.cell_size
-            pad = wp.vec3(reach * (1.0 + QUERY_PAD)) + wp.vec3(wp.abs(xi[0]), wp.abs(xi[1]), wp.abs(xi[2])) * COORD_ROUNDING
+            pad = wp.vec3(reach * (1.0 + QUERY_PAD)) + wp.vec3(wp.abs(xi[0]), wp.abs(xi[1]),
+                                                               wp.abs(xi[2])) * COORD_ROUNDING
             lo = cell_of(xi - pad, world, h)
             hi = cell_of(xi + pad, world, h)
             for cz in range(lo[2], hi[2] + 1):
