@@ -2,6 +2,8 @@
 
     python benchmarks/profile_step.py --spheres 1000000 --device cuda [--order morton|lattice]
         [--neighbour-search cell_list|hash_grid] [--wall-stage split|fused]
+        [--neighbour-layout sphere_major|slot_major] [--history-layout sphere_major|slot_major]
+        [--fused-placement] [--load-state NPZ]
 
 Prints one JSON line: milliseconds per stage (sphere placement, the neighbour search's build
 (``hash_grid_build`` or ``cell_list_build``), a full list rebuild (search + list kernel), the
@@ -10,6 +12,8 @@ averaged over --repeats steps, plus the bytes a step must at least move per sphe
 effective bandwidth that implies. On CUDA also ``kernels_ms_per_step``: milliseconds per step
 of each kernel over --repeats ungraphed steps (Warp's CUDA activity timing, summed per kernel
 name, as in step_cost.py); left out on the CPU, where that timing is not available.
+``--load-state``: start from a settled State saved by ``settled_bed.py --save-state`` (same
+--spheres, --rolling and --order) instead of running --settle-time.
 """
 from __future__ import annotations
 
@@ -21,9 +25,10 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, WALL_STAGES
+from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
+                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
 
-from settled_bed import build  # noqa: E402  (run from benchmarks/ or with it on sys.path)
+from settled_bed import build, load_settled_state, min_bytes_per_sphere_step  # noqa: E402  (run from benchmarks/)
 from step_cost import kernel_breakdown  # noqa: E402
 
 
@@ -66,13 +71,26 @@ def main(argv=None):
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
     ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
                     help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
+    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
+                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
+    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
+    ap.add_argument("--fused-placement", action="store_true",
+                    help="the integrator places the member spheres (no placement launch per step)")
+    ap.add_argument("--load-state", default=None, metavar="NPZ", help="start from this settled State")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
     sim = wd.Simulation(model, 5e-5, steps_per_graph=50, neighbour_search=args.neighbour_search,
-                        wall_stage=args.wall_stage)
-    sim.run(int(args.settle_time / 5e-5), check_every=5000)
+                        wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
+                        history_layout=args.history_layout, fused_placement=args.fused_placement)
+    if args.load_state:
+        load_settled_state(args.load_state, sim)
+        sim.run(200, check_every=200)
+    else:
+        sim.run(int(args.settle_time / 5e-5), check_every=5000)
     s, m, so = sim.state, model, sim.solver
 
     def place():
@@ -96,6 +114,7 @@ def main(argv=None):
 
     def full_step():
         so.step(sim.state, sim._next)
+        sim.state, sim._next = sim._next, sim.state  # as a run does (fused_placement expects it)
 
     stages = {"place_spheres": timed(place, device, args.repeats),
               f"{args.neighbour_search}_build": timed(grid, device, args.repeats),
@@ -103,8 +122,9 @@ def main(argv=None):
               "rebuild_skipped": timed(rebuild_skipped, device, args.repeats),
               "full_step": timed(full_step, device, args.repeats)}
     grid()
-    stages["contact_stages"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5), device, args.repeats)
-    stages["contact_stages_no_walls"] = timed(lambda: so.launch_contacts(s, sim._next, 5e-5, walls_on=False), device, args.repeats)
+    stages["contact_stages"] = timed(lambda: so.launch_contacts(sim.state, sim._next, 5e-5), device, args.repeats)
+    stages["contact_stages_no_walls"] = timed(lambda: so.launch_contacts(sim.state, sim._next, 5e-5, walls_on=False),
+                                              device, args.repeats)
     if so.grid is not None:
         nb = wp.zeros(m.num_spheres, dtype=int, device=device)
         stages["grid_query_only"] = timed(lambda: wp.launch(count_neighbours, dim=m.num_spheres, inputs=[
@@ -118,12 +138,13 @@ def main(argv=None):
     del search.build  # the class's method again
     n = m.num_spheres
     k_avg = float(s.contact_count.numpy().mean())
-    # minimum traffic per sphere-step: body state in/out (q, rot, v, w: 52 B each way), sphere x
-    # (12 B w + r), contact slots in/out (count + per contact partner 4 B + spring 12 B + roll 12 B)
-    bytes_per_sphere = 2 * 52 + 12 * 3 + 8 + 2 * (4 + k_avg * 28)
+    bytes_per_sphere = min_bytes_per_sphere_step(k_avg)
     ms = stages["full_step"]
     out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order,
-               neighbour_search=args.neighbour_search, wall_stage=args.wall_stage, contacts_per_sphere=round(k_avg, 3),
+               neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
+               neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
+               fused_placement=args.fused_placement,
+               state_from=args.load_state or f"{args.settle_time} s settled here", contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))
     if wp.get_device(device).is_cuda:  # CUDA activity timing; advances the simulation (last)

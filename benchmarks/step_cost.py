@@ -2,6 +2,8 @@
 
     python benchmarks/step_cost.py --device cuda [--spheres 2000 20000 200000] [--worlds 1]
         [--neighbour-search cell_list|hash_grid] [--wall-stage split|fused]
+        [--neighbour-layout sphere_major|slot_major] [--history-layout sphere_major|slot_major]
+        [--fused-placement]
 
 A drum-like case per size: spheres d = 16-20 mm in drums of 0.3 m (one drum per world, each
 rotating at its own speed, as the diagnosis' drum designs are), about 950 spheres per drum,
@@ -20,7 +22,8 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, WALL_STAGES
+from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
+                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
 
 PER_DRUM = 950  # a loose lattice holds ~950 in the drum's lower part (the paper fill settles to 1,648)
 DT = 8.2599588e-05
@@ -81,13 +84,21 @@ def main(argv=None):
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
     ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
                     help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
+    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
+                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
+    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
+    ap.add_argument("--fused-placement", action="store_true",
+                    help="the integrator places the member spheres (no placement launch per step)")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)
         sim = wd.Simulation(model, DT, force=True, neighbour_search=args.neighbour_search,
-                            wall_stage=args.wall_stage)
+                            wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
+                            history_layout=args.history_layout, fused_placement=args.fused_placement)
         sim.run(2000, check_every=2000)  # let the lattice collapse first
         graph_ms = per_step_ms(sim, args.steps, device)
         sim.use_graph = False
@@ -95,6 +106,8 @@ def main(argv=None):
         kernels = kernel_breakdown(sim, 50) if wp.get_device(device).is_cuda else {}
         print(json.dumps(dict(case="drum-step-cost", device=wp.get_device(device).name, spheres=model.num_spheres,
                               worlds=worlds, neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
+                              neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
+                              fused_placement=args.fused_placement,
                               graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
                               sphere_steps_per_s=float(f"{model.num_spheres / (graph_ms * 1e-3):.3g}"),
                               list_builds=int(sim.solver.list_builds.numpy()[0]), kernels_ms_per_step=kernels,

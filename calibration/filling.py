@@ -405,6 +405,7 @@ def level(sim, height: float, world: int | None = None) -> np.ndarray:
         remove &= h["body_world"] == world
     active[remove] = 0
     sim.state.body_active.assign(active)
+    sim.solver.invalidate_views()  # a no-op unless the solver fuses the placement into integration
     return np.bincount(h["body_world"][remove], minlength=sim.model.num_worlds)
 
 

@@ -292,6 +292,7 @@ class ParticleInlet:
                       inputs=[self._schedule, bodies, st.time, sim.solver.rebuild, self._count], device=m.device)
         wp.launch(remove_leaving, dim=m.num_bodies, inputs=[bodies, self._exits, self._out, self._lost],
                   device=m.device)
+        sim.solver.invalidate_views()  # bodies left play (a no-op unless the solver fuses the placement)
 
     # ---------------------------------------------------------------- read-back
     @property

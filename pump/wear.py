@@ -26,6 +26,7 @@ relative to the wall, split into normal v_n and tangential v_t parts):
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -35,6 +36,7 @@ import warp as wp
 from warpdem import kernels as wk
 from warpdem.body_forces import BodyForceContext, BodyForceModel, ParameterSpec, register_body_force
 from warpdem.errors import ConfigError
+from warpdem.layouts import DEFAULT_SLOT_LAYOUT, entry_function
 
 from .coupling import StructCache
 from .geometry import BLADE_ZONES, COMPONENTS
@@ -76,7 +78,8 @@ class ImpactBodies:
 
 @wp.struct
 class ContactSlots:
-    """One State's contact slots: slot s of sphere i at i * per_sphere + s."""
+    """One State's contact slots: slot s of sphere i at i * per_sphere + s, or at
+    s * num_spheres + i with the solver's ``history_layout="slot_major"``."""
 
     per_sphere: int  # slots per sphere (Model.max_contacts)
     count: wp.array(dtype=int)  # slots in use per sphere
@@ -115,46 +118,57 @@ class ImpactTallies:
     max_normal_speed: wp.array(dtype=float)  # (1,): largest v_n of any impact [m/s]
 
 
-@wp.kernel
-def record_wall_impacts(bodies: ImpactBodies, before: ContactSlots, after: ContactSlots, points: SlotContactPoints,
-                        walls: WallMotions, time: wp.array(dtype=wp.float64), finnie_k: float,
-                        tallies: ImpactTallies):
-    """New wall contacts of this step (in ``after``, not matched in ``before``) -> Finnie
-    erosion V = k m v^2 f(alpha) [m^3], impact count and normal impact energy 1/2 m v_n^2 [J]
-    per triangle; ``finnie_k`` [m^3/J], ``time`` [s] of the step's start."""
-    i = wp.tid()
-    b = bodies.sphere_body[i]
-    if bodies.active[b] == 0:
-        return
-    base = i * after.per_sphere
-    t_now = time[0]
-    for s in range(after.count[i]):
-        tag = after.partner[base + s]
-        if tag >= 0:
-            continue
-        nrm = after.wall_normal[base + s]
-        new = int(1)
-        for o in range(before.count[i]):
-            if before.partner[base + o] == tag and wp.dot(before.wall_normal[base + o], nrm) > wk.WALL_MATCH_COS:
-                new = 0
-        if new == 0:
-            continue
-        kw = -tag - 1
-        cp = points.point[base + s]
-        v_wall = wk.wall_point_velocity(t_now, walls.t_start[kw], walls.t_stop[kw], walls.origin[kw],
-                                        walls.linear_velocity[kw], walls.angular_velocity[kw], cp)
-        v_rel = bodies.velocity[b] + wp.cross(bodies.angular_velocity[b], cp - bodies.position[b]) - v_wall
-        v_n = -wp.dot(v_rel, nrm)
-        if v_n <= 0.0:
-            continue
-        v_t = wp.length(v_rel + v_n * nrm)
-        alpha = wp.atan2(v_n, v_t)
-        m = bodies.mass[b]
-        idx = bodies.sphere_world[i] * walls.total_triangles + walls.triangle_offset[kw] + points.triangle[base + s]
-        wp.atomic_add(tallies.erosion, idx, finnie_k * m * wp.dot(v_rel, v_rel) * finnie_angle_function(alpha))
-        wp.atomic_add(tallies.impacts, idx, 1.0)
-        wp.atomic_add(tallies.impact_energy, idx, 0.5 * m * v_n * v_n)
-        wp.atomic_max(tallies.max_normal_speed, 0, v_n)
+@functools.lru_cache(maxsize=None)
+def record_wall_impacts_kernel(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
+    """:func:`record_wall_impacts` for the solver's contact-slot layout (``DEMSolver.history_layout``,
+    :mod:`warpdem.layouts`), built once per layout."""
+    entry = entry_function(history_layout)  # compiled in: where slot s of sphere i lies
+
+    @wp.kernel
+    def record_wall_impacts(bodies: ImpactBodies, before: ContactSlots, after: ContactSlots, points: SlotContactPoints,
+                            walls: WallMotions, time: wp.array(dtype=wp.float64), finnie_k: float,
+                            tallies: ImpactTallies):
+        """New wall contacts of this step (in ``after``, not matched in ``before``) -> Finnie
+        erosion V = k m v^2 f(alpha) [m^3], impact count and normal impact energy 1/2 m v_n^2 [J]
+        per triangle; ``finnie_k`` [m^3/J], ``time`` [s] of the step's start."""
+        i = wp.tid()
+        b = bodies.sphere_body[i]
+        if bodies.active[b] == 0:
+            return
+        rows = after.count.shape[0]
+        slots = after.per_sphere
+        t_now = time[0]
+        for s in range(after.count[i]):
+            e = entry(i, s, rows, slots)
+            tag = after.partner[e]
+            if tag >= 0:
+                continue
+            nrm = after.wall_normal[e]
+            new = int(1)
+            for o in range(before.count[i]):
+                e_old = entry(i, o, rows, slots)
+                if before.partner[e_old] == tag and wp.dot(before.wall_normal[e_old], nrm) > wk.WALL_MATCH_COS:
+                    new = 0
+            if new == 0:
+                continue
+            kw = -tag - 1
+            cp = points.point[e]
+            v_wall = wk.wall_point_velocity(t_now, walls.t_start[kw], walls.t_stop[kw], walls.origin[kw],
+                                            walls.linear_velocity[kw], walls.angular_velocity[kw], cp)
+            v_rel = bodies.velocity[b] + wp.cross(bodies.angular_velocity[b], cp - bodies.position[b]) - v_wall
+            v_n = -wp.dot(v_rel, nrm)
+            if v_n <= 0.0:
+                continue
+            v_t = wp.length(v_rel + v_n * nrm)
+            alpha = wp.atan2(v_n, v_t)
+            m = bodies.mass[b]
+            idx = bodies.sphere_world[i] * walls.total_triangles + walls.triangle_offset[kw] + points.triangle[e]
+            wp.atomic_add(tallies.erosion, idx, finnie_k * m * wp.dot(v_rel, v_rel) * finnie_angle_function(alpha))
+            wp.atomic_add(tallies.impacts, idx, 1.0)
+            wp.atomic_add(tallies.impact_energy, idx, 0.5 * m * v_n * v_n)
+            wp.atomic_max(tallies.max_normal_speed, 0, v_n)
+
+    return record_wall_impacts
 
 
 @register_body_force
@@ -223,7 +237,7 @@ class ImpactRecorder(BodyForceModel):
         points = self._points(s.slot_point, s.slot_tri)
         walls = self._walls(m.wall_tri_offset, m.wall_lin_vel, m.wall_ang_vel, m.wall_origin, m.wall_t_start,
                             m.wall_t_stop)
-        wp.launch(record_wall_impacts, dim=m.num_spheres, inputs=[
+        wp.launch(record_wall_impacts_kernel(s.history_layout), dim=m.num_spheres, inputs=[
             bodies, before, after, points, walls, state_in.time, self.values["finnie_k"], self._tallies],
             device=m.device)
 

@@ -1,5 +1,8 @@
 """CUDA checks (run on a GPU machine with ``pytest -m gpu``): the same kernels give the same
 physics on ``cuda`` as on ``cpu``, with and without CUDA-graph capture."""
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import warp as wp
@@ -154,3 +157,67 @@ def test_cuda_turning_drums_match_cpu():
         return sim.state.body_q.numpy()
 
     np.testing.assert_allclose(run("cuda"), run("cpu"), atol=2e-5)
+
+
+# ----------------------------------------------------------------------------- issue 15 levers
+# The solver's layout and placement levers (tests/test_layout_levers.py on the CPU) on CUDA, with
+# the CUDA graph: each lever alone and all together against the default, same scenes. Only
+# integer indices and the kernel that writes a sphere's position and view differ, so the body
+# states should agree bit for bit; the wear sums use unordered atomic adds (rtol 1e-5, as in
+# tests/test_wall_stage.py). Should a compiler contract the placement's float operations
+# differently in the integrator than in the placement kernel, the bodies are held to rtol 1e-5 /
+# atol 1e-9 (tests/test_contact_stages.py's tolerance) and a warning names the arrays that
+# differ in the last bits.
+LAYOUT_SCENES = ["drum", "clumps", "wear", "drum_settle", "drum_unstable"]  # two contact laws: few kernels to compile
+LAYOUT_LEVERS = ["neighbour_slot_major", "history_slot_major", "fused_placement", "all"]
+
+
+@pytest.fixture(scope="module")
+def layout_kernels():
+    """Build every kernel variant these tests use before the first launch, so that Warp compiles
+    each module once (a module is compiled again whenever a kernel is added to it)."""
+    needs_cuda()
+    from warpdem import kernels, stages
+    from warpdem.stages.cell_list import build_neighbour_list_from_cells_kernel
+
+    for law in (wd.ContactLaw(), wd.ContactLaw(rolling="cdt")):
+        for nl in ("sphere_major", "slot_major"):
+            for hl in ("sphere_major", "slot_major"):
+                stages.contact_stages(law, nl, hl)
+    for layout in ("sphere_major", "slot_major"):
+        build_neighbour_list_from_cells_kernel(layout)
+    for fused in (False, True):
+        kernels.integrate_bodies_kernel(fused)
+        kernels.isolate_unstable_bodies_kernel(fused)
+
+
+_cuda_default: dict = {}
+
+
+@pytest.mark.parametrize("lever", LAYOUT_LEVERS)
+@pytest.mark.parametrize("name", LAYOUT_SCENES)
+def test_cuda_layout_levers_match_the_default(name, lever, layout_kernels, monkeypatch):
+    import warnings
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_layout_levers import LEVERS, RUNS, run_with
+
+    if name not in _cuda_default:
+        _cuda_default[name] = run_with(RUNS[name], {}, "cuda", monkeypatch, use_graph=True)
+    want = _cuda_default[name]
+    got = run_with(RUNS[name], LEVERS[lever], "cuda", monkeypatch, use_graph=True)
+    assert int(want["contact_count"].sum()) > 0
+    assert got.keys() == want.keys()
+    not_bitwise = []
+    for key, w in want.items():
+        if np.array_equal(got[key], w):
+            continue
+        if key.startswith("wear_"):
+            np.testing.assert_allclose(got[key], w, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{lever}/{key}")
+            continue
+        if key in ("contact_count", "contact_partner", "body_active"):
+            raise AssertionError(f"{name}/{lever}/{key}: integer arrays differ from the default")
+        np.testing.assert_allclose(got[key], w, rtol=1e-5, atol=1e-9, err_msg=f"{name}/{lever}/{key}")
+        not_bitwise.append(f"{key} (max |diff| {np.abs(got[key].astype(float) - w.astype(float)).max():.2g})")
+    if not_bitwise:
+        warnings.warn(f"{name}/{lever}: within tolerance but not bit for bit: {', '.join(not_bitwise)}")

@@ -10,6 +10,14 @@ larger N, or W worlds of N each). Pour from a loose lattice, settle until KE per
     python benchmarks/settled_bed.py --spheres 20000 --worlds 50 --device cuda
     python benchmarks/settled_bed.py --spheres 1000000 --device cuda --neighbour-search hash_grid
     python benchmarks/settled_bed.py --spheres 1000000 --device cuda --wall-stage fused
+    python benchmarks/settled_bed.py --spheres 1000000 --device cuda --save-state /tmp/bed.npz
+    python benchmarks/settled_bed.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz \
+        --neighbour-layout slot_major --history-layout slot_major --fused-placement
+
+``--save-state`` writes the settled State (contact slots in the default layout) before the
+warm-up; ``--load-state`` starts from such a file instead of settling (same --spheres, --worlds,
+--rolling, --max-contacts and --order: the model's fingerprint must match), so that solver
+variants are timed from one settled bed.
 """
 from __future__ import annotations
 
@@ -24,7 +32,8 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
-from warpdem.solver import DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, WALL_STAGES
+from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
+                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
 
 D = 0.018
 R = D / 2
@@ -72,20 +81,54 @@ def build(n: int, worlds: int, rolling: str, device: str, max_contacts: int, ord
     return b.finalize(device, check_overlaps=n * worlds <= 200_000), width
 
 
-def settle_and_time(sim: wd.Simulation, device: str, settle_time: float, warmup: int, steps: int,
-                    min_time: float = 0.3) -> tuple[float, float, float]:
-    """The case's protocol: settle (KE per body < 1e-6 J or ``settle_time`` simulated seconds), run
-    ``warmup`` steps, time ``steps`` steps. Returns (settling sim time, settling wall s, timed wall s)."""
-    t0 = time.perf_counter()
-    settle_sim_time = sim.settle(ke_per_particle=1e-6, max_time=settle_time, check_interval=0.05,
-                                 min_time=min(min_time, settle_time)).time
-    t_settle = time.perf_counter() - t0
+def min_bytes_per_sphere_step(contacts_per_sphere: float) -> float:
+    """The traffic a step must at least move per sphere [B]: body state in and out (q, rot, v, w:
+    52 B each way), sphere position (12 B written, read twice) and radius, and the contact slots in
+    and out (count 4 B + per contact partner 4 B, spring 12 B, rolling history 12 B)."""
+    return 2 * 52 + 12 * 3 + 8 + 2 * (4 + contacts_per_sphere * 28)
+
+
+def save_settled_state(path: str, sim: wd.Simulation, settle_sim_time: float) -> None:
+    """The settled State (contact slots in the default layout) with the model's fingerprint."""
+    data = sim.solver.export_state(sim.state)
+    np.savez(path, fingerprint=np.array(sim.model.fingerprint), settle_sim_time=np.array(settle_sim_time),
+             **{f"state/{k}": v for k, v in data.items()})
+
+
+def load_settled_state(path: str, sim: wd.Simulation) -> float:
+    """Load a State of :func:`save_settled_state` into both of ``sim``'s States (in its solver's
+    layout); returns the simulated settling time it took."""
+    with np.load(path) as f:
+        data = {k[6:]: f[k] for k in f.files if k.startswith("state/")}
+        fingerprint, settle_sim_time = str(f["fingerprint"]), float(f["settle_sim_time"])
+    for state in (sim.state, sim._next):
+        sim.solver.import_state(state, data, fingerprint=fingerprint)
+    sim.solver.request_neighbour_rebuild()
+    return settle_sim_time
+
+
+def time_steps(sim: wd.Simulation, device: str, warmup: int, steps: int) -> float:
+    """Run ``warmup`` steps, then time ``steps`` steps [s]."""
     sim.run(warmup)
     wp.synchronize_device(device)
     t0 = time.perf_counter()
     sim.run(steps, check_every=steps)
     wp.synchronize_device(device)
-    return settle_sim_time, t_settle, time.perf_counter() - t0
+    return time.perf_counter() - t0
+
+
+def settle_and_time(sim: wd.Simulation, device: str, settle_time: float, warmup: int, steps: int,
+                    min_time: float = 0.3, on_settled=None) -> tuple[float, float, float]:
+    """The case's protocol: settle (KE per body < 1e-6 J or ``settle_time`` simulated seconds), run
+    ``warmup`` steps, time ``steps`` steps. Returns (settling sim time, settling wall s, timed wall s).
+    ``on_settled(settle_sim_time)`` is called between settling and the warm-up."""
+    t0 = time.perf_counter()
+    settle_sim_time = sim.settle(ke_per_particle=1e-6, max_time=settle_time, check_interval=0.05,
+                                 min_time=min(min_time, settle_time)).time
+    t_settle = time.perf_counter() - t0
+    if on_settled is not None:
+        on_settled(settle_sim_time)
+    return settle_sim_time, t_settle, time_steps(sim, device, warmup, steps)
 
 
 def main(argv=None) -> dict:
@@ -105,6 +148,17 @@ def main(argv=None) -> dict:
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
     ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
                     help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
+    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
+                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
+    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
+    ap.add_argument("--fused-placement", action="store_true",
+                    help="the integrator places the member spheres (no placement launch per step)")
+    ap.add_argument("--save-state", default=None, metavar="NPZ",
+                    help="save the settled State here (before the warm-up)")
+    ap.add_argument("--load-state", default=None, metavar="NPZ",
+                    help="start from this settled State instead of settling")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
@@ -112,12 +166,22 @@ def main(argv=None) -> dict:
     model, width = build(args.spheres, args.worlds, args.rolling, device, args.max_contacts, args.order)
     sim = wd.Simulation(model, 5.0e-5, use_graph=None if not args.no_graph else False, steps_per_graph=50,
                         conditional_rebuild=args.conditional_rebuild, neighbour_search=args.neighbour_search,
-                        wall_stage=args.wall_stage)
+                        wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
+                        history_layout=args.history_layout, fused_placement=args.fused_placement)
     t_build = time.perf_counter() - t0
-    settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps)
+    if args.load_state:
+        t0 = time.perf_counter()
+        settle_sim_time = load_settled_state(args.load_state, sim)
+        t_settle = time.perf_counter() - t0
+        seconds = time_steps(sim, device, args.warmup, args.steps)
+    else:
+        save = (lambda t: save_settled_state(args.save_state, sim, t)) if args.save_state else None
+        settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps,
+                                                             on_settled=save)
     ke = sim.kinetic_energy() / args.spheres
     counts = sim.state.contact_count.numpy()
     n_total = args.spheres * args.worlds
+    bytes_per_sphere = min_bytes_per_sphere_step(float(counts.mean()))
     result = dict(
         case="settled-bed", device=str(wp.get_device(device)), device_name=wp.get_device(device).name,
         host=platform.node(), spheres=args.spheres, worlds=args.worlds, total_spheres=n_total, steps=args.steps,
@@ -127,6 +191,10 @@ def main(argv=None) -> dict:
         ke_per_particle_J=float(f"{ke.max():.3g}"), build_s=round(t_build, 1), warp=wp.config.version,
         graph=sim.use_graph, order=args.order, conditional_rebuild=args.conditional_rebuild,
         neighbour_search=sim.solver.neighbour_search, wall_stage=sim.solver.wall_stage,
+        neighbour_layout=sim.solver.neighbour_layout, history_layout=sim.solver.history_layout,
+        fused_placement=sim.solver.fused_placement, state_from=args.load_state or "settled here",
+        min_bytes_per_sphere_step=round(bytes_per_sphere),
+        effective_GBps=round(n_total * args.steps * bytes_per_sphere / seconds / 1e9, 1),
         list_builds=int(sim.solver.list_builds.numpy()[0]), date=time.strftime("%Y-%m-%d"))
     print(json.dumps(result), flush=True)
     return result

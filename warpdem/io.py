@@ -159,7 +159,9 @@ class VtkSeries:
 # ----------------------------------------------------------------------------- checkpoints
 def save_checkpoint(path: str | os.PathLike, sim) -> Path:
     """Save model, state, wall accumulators and step count to one ``.npz`` file, with the
-    model's fingerprint (:attr:`Model.fingerprint`) and the solver's ``v_ref`` and ``force``."""
+    model's fingerprint (:attr:`Model.fingerprint`) and the solver's ``v_ref`` and ``force``. The
+    contact slots are saved in the default layout whatever the solver's ``history_layout``, so a
+    checkpoint loads into a solver of either layout."""
     m: Model = sim.model
     law = m.contact_law
     meta = dict(
@@ -176,7 +178,8 @@ def save_checkpoint(path: str | os.PathLike, sim) -> Path:
         max_contacts=m.max_contacts, gravity=list(m.gravity), dt=sim.dt, steps=sim.steps)
     arrays = {f"host/{k}": v for k, v in m.host.items()}
     arrays.update({f"initial/{k}": v for k, v in m.initial.items()})
-    arrays.update({f"state/{k}": v for k, v in sim.state.to_numpy().items()})
+    # contact slots in the default layout whatever the solver's history_layout (loadable by any solver)
+    arrays.update({f"state/{k}": v for k, v in sim.solver.export_state(sim.state).items()})
     for f in sim.solver.wall_stats.FIELDS:
         arrays[f"wear/{f}"] = getattr(sim.solver.wall_stats, f).numpy()
     for i, w in enumerate(m.walls):
@@ -231,8 +234,8 @@ def _load_checkpoint(path: Path, data, device: str | None, model: Model | None, 
     if missing:
         raise ConfigError(f"checkpoint {path} is incomplete: state arrays {missing} are missing")
     fp = saved_fp if saved_fp is not None else model.fingerprint
-    sim.state.load_numpy(state, fingerprint=fp)
-    sim._next.load_numpy(state, fingerprint=fp)
+    sim.solver.import_state(sim.state, state, fingerprint=fp)  # into the solver's slot layout
+    sim.solver.import_state(sim._next, state, fingerprint=fp)
     for f in sim.solver.wall_stats.FIELDS:
         getattr(sim.solver.wall_stats, f).assign(data[f"wear/{f}"])
     sim.steps = int(meta["steps"])

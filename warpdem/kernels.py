@@ -9,7 +9,11 @@ for integration.
 """
 from __future__ import annotations
 
+import functools
+
 import warp as wp
+
+from .layouts import DEFAULT_SLOT_LAYOUT, entry_function
 
 # Engine kernels need no adjoints (halves compile time); fast math for sqrt/div/log on CUDA.
 wp.set_module_options({"enable_backward": False, "fast_math": True})
@@ -134,6 +138,51 @@ class SphereView:
     mat: int  # material index
 
 
+@wp.func
+def sphere_view(x: wp.vec3, radius: float, material: int, xb: wp.vec3, v: wp.vec3, w: wp.vec3, mass: float,
+                inertia: wp.vec3, active: int):
+    """The :class:`SphereView` of a sphere at ``x`` [m] of a body at ``xb`` [m] moving at ``v``,
+    ``w`` (radius -1 if the body is inactive)."""
+    sv = SphereView()
+    sv.x = x
+    sv.r = radius
+    if active == 0:
+        sv.r = -1.0
+    sv.v = v
+    sv.m = mass
+    sv.w = w
+    sv.i_mean = (inertia[0] + inertia[1] + inertia[2]) / 3.0
+    sv.xb = xb
+    sv.mat = material
+    return sv
+
+
+@wp.func
+def place_sphere(
+    i: int,
+    sphere_body: wp.array(dtype=int),
+    sphere_offset: wp.array(dtype=wp.vec3),
+    sphere_radius: wp.array(dtype=float),
+    sphere_material: wp.array(dtype=int),
+    body_q: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.quat),
+    body_v: wp.array(dtype=wp.vec3),
+    body_w: wp.array(dtype=wp.vec3),
+    body_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_active: wp.array(dtype=int),
+    sphere_x: wp.array(dtype=wp.vec3),
+    views: wp.array(dtype=SphereView),
+):
+    """Sphere i's position from its body's pose, and its packed :class:`SphereView`."""
+    b = sphere_body[i]
+    xb = body_q[b]
+    x = xb + wp.quat_rotate(body_rot[b], sphere_offset[i])
+    sphere_x[i] = x
+    views[i] = sphere_view(x, sphere_radius[i], sphere_material[i], xb, body_v[b], body_w[b], body_mass[b],
+                           body_inertia[b], body_active[b])
+
+
 @wp.kernel
 def place_sphere_views(
     sphere_body: wp.array(dtype=int),
@@ -151,24 +200,75 @@ def place_sphere_views(
     views: wp.array(dtype=SphereView),
 ):
     """Sphere positions from body poses, and each sphere's packed :class:`SphereView`."""
-    i = wp.tid()
-    b = sphere_body[i]
-    xb = body_q[b]
-    x = xb + wp.quat_rotate(body_rot[b], sphere_offset[i])
-    sphere_x[i] = x
-    inertia = body_inertia[b]
-    sv = SphereView()
-    sv.x = x
-    sv.r = sphere_radius[i]
-    if body_active[b] == 0:
-        sv.r = -1.0
-    sv.v = body_v[b]
-    sv.m = body_mass[b]
-    sv.w = body_w[b]
-    sv.i_mean = (inertia[0] + inertia[1] + inertia[2]) / 3.0
-    sv.xb = xb
-    sv.mat = sphere_material[i]
-    views[i] = sv
+    place_sphere(wp.tid(), sphere_body, sphere_offset, sphere_radius, sphere_material, body_q, body_rot, body_v,
+                 body_w, body_mass, body_inertia, body_active, sphere_x, views)
+
+
+# threads of the grid-stride placement launch of ``fused_placement`` (an early exit on most steps)
+MAX_PLACEMENT_THREADS = 1 << 16
+
+
+@wp.kernel
+def place_sphere_views_on_request(
+    request: wp.array(dtype=int),
+    rebuild: wp.array(dtype=int),
+    num_spheres: int,
+    stride: int,
+    sphere_body: wp.array(dtype=int),
+    sphere_offset: wp.array(dtype=wp.vec3),
+    sphere_radius: wp.array(dtype=float),
+    sphere_material: wp.array(dtype=int),
+    body_q: wp.array(dtype=wp.vec3),
+    body_rot: wp.array(dtype=wp.quat),
+    body_v: wp.array(dtype=wp.vec3),
+    body_w: wp.array(dtype=wp.vec3),
+    body_mass: wp.array(dtype=float),
+    body_inertia: wp.array(dtype=wp.vec3),
+    body_active: wp.array(dtype=int),
+    sphere_x: wp.array(dtype=wp.vec3),
+    views: wp.array(dtype=SphereView),
+):
+    """:func:`place_sphere_views` (grid-stride, ``stride`` = the launch's thread count) only if
+    ``request[0]`` (the views are not this State's: first step, a State changed between steps) or
+    ``rebuild[0]`` (a list rebuild asked for before the step: bodies were added, moved or removed)
+    is set; else every thread returns at once. With ``fused_placement`` the integrator places the
+    spheres of the State it writes (:func:`integrate_bodies_kernel`) and clears ``request``."""
+    if request[0] == 0 and rebuild[0] == 0:
+        return
+    for i in range(wp.tid(), num_spheres, stride):
+        place_sphere(i, sphere_body, sphere_offset, sphere_radius, sphere_material, body_q, body_rot, body_v, body_w,
+                     body_mass, body_inertia, body_active, sphere_x, views)
+
+
+@wp.struct
+class MemberPlacement:
+    """What the integrator needs to place a body's member spheres right after it moved the body
+    (``DEMSolver(fused_placement=True)``): the model's bodies and spheres, the packed views, and
+    the device flag that asks the next step to place every sphere itself."""
+
+    first: wp.array(dtype=int)  # first member sphere of each body (Model.body_first)
+    count: wp.array(dtype=int)  # member spheres of each body (Model.body_count)
+    mass: wp.array(dtype=float)  # body mass [kg]
+    inertia: wp.array(dtype=wp.vec3)  # principal moments of inertia [kg m^2]
+    offset: wp.array(dtype=wp.vec3)  # sphere centre in the body frame [m]
+    radius: wp.array(dtype=float)  # sphere radius [m]
+    material: wp.array(dtype=int)  # sphere material index
+    views: wp.array(dtype=SphereView)  # the solver's packed views (of the State just written)
+    request: wp.array(dtype=int)  # [0] != 0: the views are stale, the next step places them all
+
+
+@wp.func
+def place_members(b: int, xb: wp.vec3, rot: wp.quat, v: wp.vec3, w: wp.vec3, active: int, members: MemberPlacement,
+                  sphere_x: wp.array(dtype=wp.vec3)):
+    """Positions and views of body b's member spheres for the pose ``xb``, ``rot`` and velocities
+    ``v``, ``w`` just written (the same values :func:`place_sphere_views` would read back)."""
+    first = members.first[b]
+    mass = members.mass[b]
+    inertia = members.inertia[b]
+    for s in range(first, first + members.count[b]):
+        x = xb + wp.quat_rotate(rot, members.offset[s])
+        sphere_x[s] = x
+        members.views[s] = sphere_view(x, members.radius[s], members.material[s], xb, v, w, mass, inertia, active)
 
 
 @wp.func
@@ -236,86 +336,109 @@ def rotate_by(r: wp.quatd, w: wp.vec3d, h: wp.float64):
     return wp.normalize(wp.quat_from_axis_angle(w / wl, wl * h) * r)
 
 
-@wp.kernel
-def integrate_bodies(
-    body_first: wp.array(dtype=int),
-    body_count: wp.array(dtype=int),
-    body_mass: wp.array(dtype=float),
-    body_inertia: wp.array(dtype=wp.vec3),
-    body_world: wp.array(dtype=int),
-    sphere_f: wp.array(dtype=wp.vec3),
-    sphere_t: wp.array(dtype=wp.vec3),
-    external_f: wp.array(dtype=wp.vec3),
-    use_external: int,
-    gravity: wp.vec3,
-    dt: float,
-    active_in: wp.array(dtype=int),
-    q_in: wp.array(dtype=wp.vec3),
-    rot_in: wp.array(dtype=wp.quat),
-    v_in: wp.array(dtype=wp.vec3),
-    w_in: wp.array(dtype=wp.vec3),
-    active_out: wp.array(dtype=int),
-    q_out: wp.array(dtype=wp.vec3),
-    rot_out: wp.array(dtype=wp.quat),
-    v_out: wp.array(dtype=wp.vec3),
-    w_out: wp.array(dtype=wp.vec3),
-    world_paused: wp.array(dtype=int),
-):
-    """Semi-implicit (symplectic) Euler step of rigid bodies. Removed bodies and bodies of a
-    paused world keep their pose at rest (unstable results are caught afterwards by
-    :func:`isolate_unstable_bodies`).
+@functools.lru_cache(maxsize=None)
+def integrate_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
+    """The body integrator (:func:`integrate_bodies` below), built once per choice.
 
-    Translation: v' = v + (F/m + g) dt, x' = x + v' dt.
-    Rotation (asymmetric bodies): the world angular momentum L = R I R^T w is advanced by the
-    torque, L' = L + T dt (exactly conserved without torque); the quaternion is advanced with
-    the angular velocity w = R I^-1 R^T L' and renormalised; w' is recomputed from L' at the
-    new orientation so that the body frame and L stay consistent (cf. Rapaport 2004, The Art
-    of Molecular Dynamics Simulation, ch. 8; "NO_SQUISH"-style angular-momentum form).
-    Member forces are summed in a fixed order (no atomics: deterministic).
-    """
-    b = wp.tid()
-    act = active_in[b]
-    active_out[b] = act
-    if act == 0 or world_paused[body_world[b]] != 0:
-        q_out[b] = q_in[b]
-        rot_out[b] = rot_in[b]
-        v_out[b] = wp.vec3(0.0)
-        w_out[b] = wp.vec3(0.0)
-        return
-    f = wp.vec3(0.0)
-    t = wp.vec3(0.0)
-    first = body_first[b]
-    for s in range(first, first + body_count[b]):
-        f = f + sphere_f[s]
-        t = t + sphere_t[s]
-    if use_external != 0:
-        f = f + external_f[b]
-    m = body_mass[b]
-    v = v_in[b] + (f / m + gravity) * dt
-    x = q_in[b] + v * dt
-    # rotation in float64: angular momentum L = R I R^T w advanced by the torque, orientation
-    # by the implicit midpoint rule R' = exp(h w_half) R with w_half = w(L, exp(h/2 w_half) R)
-    # (three fixed-point sweeps); conserves |L| exactly and E to O(h^2) without float32 drift
-    rf = rot_in[b]
-    r = wp.normalize(wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3])))
-    inertia_f = body_inertia[b]
-    inertia = wp.vec3d(wp.float64(inertia_f[0]), wp.float64(inertia_f[1]), wp.float64(inertia_f[2]))
-    wf = w_in[b]
-    w0 = wp.vec3d(wp.float64(wf[0]), wp.float64(wf[1]), wp.float64(wf[2]))
-    h = wp.float64(dt)
-    l_world = wp.quat_rotate(r, wp.cw_mul(inertia, wp.quat_rotate_inv(r, w0))) + wp.vec3d(
-        wp.float64(t[0]), wp.float64(t[1]), wp.float64(t[2])) * h
-    w_half = angular_velocity_from_momentum(r, l_world, inertia)
-    for _sweep in range(3):
-        w_half = angular_velocity_from_momentum(rotate_by(r, w_half, wp.float64(0.5) * h), l_world, inertia)
-    r_new64 = rotate_by(r, w_half, h)
-    w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
-    r_new = wp.quat(float(r_new64[0]), float(r_new64[1]), float(r_new64[2]), float(r_new64[3]))
-    w_new = wp.vec3(float(w_new64[0]), float(w_new64[1]), float(w_new64[2]))
-    q_out[b] = x
-    rot_out[b] = r_new
-    v_out[b] = v
-    w_out[b] = w_new
+    ``place_members_after`` (``DEMSolver(fused_placement=True)``): the thread of a body also
+    writes its member spheres' positions (the output State's ``sphere_x_out``) and packed views
+    from the pose and velocities it has just written (:func:`place_members`), and thread 0 clears
+    ``members.request``: the views are then the output State's, so the next step needs no
+    placement launch (which would read every body again). Without it, ``members`` and
+    ``sphere_x_out`` are not touched."""
+    fused = bool(place_members_after)
+
+    @wp.kernel
+    def integrate_bodies(
+        body_first: wp.array(dtype=int),
+        body_count: wp.array(dtype=int),
+        body_mass: wp.array(dtype=float),
+        body_inertia: wp.array(dtype=wp.vec3),
+        body_world: wp.array(dtype=int),
+        sphere_f: wp.array(dtype=wp.vec3),
+        sphere_t: wp.array(dtype=wp.vec3),
+        external_f: wp.array(dtype=wp.vec3),
+        use_external: int,
+        gravity: wp.vec3,
+        dt: float,
+        active_in: wp.array(dtype=int),
+        q_in: wp.array(dtype=wp.vec3),
+        rot_in: wp.array(dtype=wp.quat),
+        v_in: wp.array(dtype=wp.vec3),
+        w_in: wp.array(dtype=wp.vec3),
+        active_out: wp.array(dtype=int),
+        q_out: wp.array(dtype=wp.vec3),
+        rot_out: wp.array(dtype=wp.quat),
+        v_out: wp.array(dtype=wp.vec3),
+        w_out: wp.array(dtype=wp.vec3),
+        world_paused: wp.array(dtype=int),
+        members: MemberPlacement,
+        sphere_x_out: wp.array(dtype=wp.vec3),
+    ):
+        """Semi-implicit (symplectic) Euler step of rigid bodies. Removed bodies and bodies of a
+        paused world keep their pose at rest (unstable results are caught afterwards by
+        :func:`isolate_unstable_bodies`).
+
+        Translation: v' = v + (F/m + g) dt, x' = x + v' dt.
+        Rotation (asymmetric bodies): the world angular momentum L = R I R^T w is advanced by the
+        torque, L' = L + T dt (exactly conserved without torque); the quaternion is advanced with
+        the angular velocity w = R I^-1 R^T L' and renormalised; w' is recomputed from L' at the
+        new orientation so that the body frame and L stay consistent (cf. Rapaport 2004, The Art
+        of Molecular Dynamics Simulation, ch. 8; "NO_SQUISH"-style angular-momentum form).
+        Member forces are summed in a fixed order (no atomics: deterministic).
+        """
+        b = wp.tid()
+        if wp.static(fused):
+            if b == 0:  # the placement launch of this step has run: the views will be those written here
+                members.request[0] = 0
+        act = active_in[b]
+        active_out[b] = act
+        if act == 0 or world_paused[body_world[b]] != 0:
+            q_out[b] = q_in[b]
+            rot_out[b] = rot_in[b]
+            v_out[b] = wp.vec3(0.0)
+            w_out[b] = wp.vec3(0.0)
+            if wp.static(fused):
+                place_members(b, q_in[b], rot_in[b], wp.vec3(0.0), wp.vec3(0.0), act, members, sphere_x_out)
+            return
+        f = wp.vec3(0.0)
+        t = wp.vec3(0.0)
+        first = body_first[b]
+        for s in range(first, first + body_count[b]):
+            f = f + sphere_f[s]
+            t = t + sphere_t[s]
+        if use_external != 0:
+            f = f + external_f[b]
+        m = body_mass[b]
+        v = v_in[b] + (f / m + gravity) * dt
+        x = q_in[b] + v * dt
+        # rotation in float64: angular momentum L = R I R^T w advanced by the torque, orientation
+        # by the implicit midpoint rule R' = exp(h w_half) R with w_half = w(L, exp(h/2 w_half) R)
+        # (three fixed-point sweeps); conserves |L| exactly and E to O(h^2) without float32 drift
+        rf = rot_in[b]
+        r = wp.normalize(wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3])))
+        inertia_f = body_inertia[b]
+        inertia = wp.vec3d(wp.float64(inertia_f[0]), wp.float64(inertia_f[1]), wp.float64(inertia_f[2]))
+        wf = w_in[b]
+        w0 = wp.vec3d(wp.float64(wf[0]), wp.float64(wf[1]), wp.float64(wf[2]))
+        h = wp.float64(dt)
+        l_world = wp.quat_rotate(r, wp.cw_mul(inertia, wp.quat_rotate_inv(r, w0))) + wp.vec3d(
+            wp.float64(t[0]), wp.float64(t[1]), wp.float64(t[2])) * h
+        w_half = angular_velocity_from_momentum(r, l_world, inertia)
+        for _sweep in range(3):
+            w_half = angular_velocity_from_momentum(rotate_by(r, w_half, wp.float64(0.5) * h), l_world, inertia)
+        r_new64 = rotate_by(r, w_half, h)
+        w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
+        r_new = wp.quat(float(r_new64[0]), float(r_new64[1]), float(r_new64[2]), float(r_new64[3]))
+        w_new = wp.vec3(float(w_new64[0]), float(w_new64[1]), float(w_new64[2]))
+        q_out[b] = x
+        rot_out[b] = r_new
+        v_out[b] = v
+        w_out[b] = w_new
+        if wp.static(fused):
+            place_members(b, x, r_new, v, w_new, act, members, sphere_x_out)
+
+    return integrate_bodies
 
 
 # Causes of an unstable world (``DEMSolver.world_fail``): the first one seen is kept.
@@ -323,45 +446,58 @@ UNSTABLE_NONFINITE = wp.constant(1)
 UNSTABLE_SPEED = wp.constant(2)
 
 
-@wp.kernel
-def isolate_unstable_bodies(
-    body_world: wp.array(dtype=int),
-    active: wp.array(dtype=int),
-    q_in: wp.array(dtype=wp.vec3),
-    rot_in: wp.array(dtype=wp.quat),
-    q_out: wp.array(dtype=wp.vec3),
-    rot_out: wp.array(dtype=wp.quat),
-    v_out: wp.array(dtype=wp.vec3),
-    w_out: wp.array(dtype=wp.vec3),
-    v_max: float,
-    world_fail: wp.array(dtype=int),
-    world_paused: wp.array(dtype=int),
-):
-    """After integration: a body whose new state is NaN/inf (cause 1) or faster than
-    ``v_max`` [m/s] (cause 2) is put back to its last pose at rest, its world's first cause is
-    recorded in ``world_fail`` and the world is paused, so the bad values never reach another
-    step or another world. Reads no pause flag (the flags it writes act from the next step)."""
-    b = wp.tid()
-    if active[b] == 0:
-        return
-    v = v_out[b]
-    w = w_out[b]
-    r = rot_out[b]
-    code = int(0)
-    if not (wp.isfinite(q_out[b]) and wp.isfinite(v) and wp.isfinite(w)
-            and wp.isfinite(r[0]) and wp.isfinite(r[1]) and wp.isfinite(r[2]) and wp.isfinite(r[3])):
-        code = UNSTABLE_NONFINITE
-    elif wp.dot(v, v) > v_max * v_max:
-        code = UNSTABLE_SPEED
-    if code == 0:
-        return
-    world = body_world[b]
-    wp.atomic_cas(world_fail, world, 0, code)
-    world_paused[world] = 1
-    q_out[b] = q_in[b]
-    rot_out[b] = rot_in[b]
-    v_out[b] = wp.vec3(0.0)
-    w_out[b] = wp.vec3(0.0)
+@functools.lru_cache(maxsize=None)
+def isolate_unstable_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
+    """The instability check (:func:`isolate_unstable_bodies` below), built once per choice;
+    ``place_members_after`` as in :func:`integrate_bodies_kernel`: a body put back to its last
+    pose has its member spheres placed again there."""
+    fused = bool(place_members_after)
+
+    @wp.kernel
+    def isolate_unstable_bodies(
+        body_world: wp.array(dtype=int),
+        active: wp.array(dtype=int),
+        q_in: wp.array(dtype=wp.vec3),
+        rot_in: wp.array(dtype=wp.quat),
+        q_out: wp.array(dtype=wp.vec3),
+        rot_out: wp.array(dtype=wp.quat),
+        v_out: wp.array(dtype=wp.vec3),
+        w_out: wp.array(dtype=wp.vec3),
+        v_max: float,
+        world_fail: wp.array(dtype=int),
+        world_paused: wp.array(dtype=int),
+        members: MemberPlacement,
+        sphere_x_out: wp.array(dtype=wp.vec3),
+    ):
+        """After integration: a body whose new state is NaN/inf (cause 1) or faster than
+        ``v_max`` [m/s] (cause 2) is put back to its last pose at rest, its world's first cause is
+        recorded in ``world_fail`` and the world is paused, so the bad values never reach another
+        step or another world. Reads no pause flag (the flags it writes act from the next step)."""
+        b = wp.tid()
+        if active[b] == 0:
+            return
+        v = v_out[b]
+        w = w_out[b]
+        r = rot_out[b]
+        code = int(0)
+        if not (wp.isfinite(q_out[b]) and wp.isfinite(v) and wp.isfinite(w)
+                and wp.isfinite(r[0]) and wp.isfinite(r[1]) and wp.isfinite(r[2]) and wp.isfinite(r[3])):
+            code = UNSTABLE_NONFINITE
+        elif wp.dot(v, v) > v_max * v_max:
+            code = UNSTABLE_SPEED
+        if code == 0:
+            return
+        world = body_world[b]
+        wp.atomic_cas(world_fail, world, 0, code)
+        world_paused[world] = 1
+        q_out[b] = q_in[b]
+        rot_out[b] = rot_in[b]
+        v_out[b] = wp.vec3(0.0)
+        w_out[b] = wp.vec3(0.0)
+        if wp.static(fused):
+            place_members(b, q_in[b], rot_in[b], wp.vec3(0.0), wp.vec3(0.0), active[b], members, sphere_x_out)
+
+    return isolate_unstable_bodies
 
 
 @wp.kernel
@@ -458,7 +594,7 @@ class NeighbourList:
     """The Verlet list of :func:`warpdem.kernels.build_neighbour_list` (sorted by index)."""
 
     count: wp.array(dtype=int)  # entries per sphere
-    index: wp.array(dtype=int)  # neighbour sphere indices, ``capacity`` slots per sphere
+    index: wp.array(dtype=int)  # neighbour sphere indices, ``capacity`` slots per sphere (warpdem.layouts)
     capacity: int  # slots per sphere (``max_neighbours``)
     near_static_wall: wp.array(dtype=int)  # 1: a static wall lies within r_i + skin (query its BVH)
 
@@ -505,43 +641,53 @@ class VerletBuild:
     rebuild: wp.array(dtype=int)  # [0] != 0: build now (else every thread returns at once)
 
 
-@wp.func
-def add_verlet_candidate(
-    j: int,
-    xi: wp.vec3,
-    ri: float,
-    body_i: int,
-    row_start: int,
-    n_kept: int,
-    n_dropped: int,
-    spheres: ListSpheres,
-    out: VerletBuild,
-):
-    """Offer sphere ``j`` to the list row of a sphere at ``xi`` [m] of radius ``ri`` [m] and body
-    ``body_i`` (row ``out.neighbours.index[row_start : row_start + n_kept]``, sorted by index).
-    ``j`` is kept if it belongs to another, active body and its centre is closer than
-    r_i + r_j + skin [m]; it is inserted in index order (so the row does not depend on the
-    order candidates are offered, unless the row is full). A full row counts the drop in
-    ``out.overflow[0]``. Returns the row's new (kept, dropped) counts."""
-    bj = spheres.body[j]
-    if bj == body_i or spheres.body_active[bj] == 0:  # removed bodies stay where they left, out of play
-        return n_kept, n_dropped
-    d = xi - spheres.position[j]
-    reach = ri + spheres.radius[j] + spheres.skin
-    if wp.dot(d, d) >= reach * reach:
-        return n_kept, n_dropped
-    if n_kept >= out.neighbours.capacity:
-        # overflow[0]: entries dropped; overflow[1]: the largest list any sphere needed
-        wp.atomic_add(out.overflow, 0, 1)
-        return n_kept, n_dropped + 1
-    # insertion keeps the list sorted by index
-    row = out.neighbours.index
-    k = n_kept
-    while k > 0 and row[row_start + k - 1] > j:
-        row[row_start + k] = row[row_start + k - 1]
-        k -= 1
-    row[row_start + k] = j
-    return n_kept + 1, n_dropped
+@functools.lru_cache(maxsize=None)
+def verlet_candidate_function(layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Function":
+    """:func:`add_verlet_candidate` for the neighbour list's ``layout``
+    (:mod:`warpdem.layouts`), built once per layout."""
+    entry = entry_function(layout)  # compiled in: where entry k of sphere i lies
+
+    @wp.func
+    def add_verlet_candidate(
+        j: int,
+        xi: wp.vec3,
+        ri: float,
+        body_i: int,
+        i: int,
+        n_kept: int,
+        n_dropped: int,
+        spheres: ListSpheres,
+        out: VerletBuild,
+    ):
+        """Offer sphere ``j`` to the list row of sphere ``i`` at ``xi`` [m] of radius ``ri`` [m] and
+        body ``body_i`` (its ``n_kept`` entries so far, sorted by index). ``j`` is kept if it
+        belongs to another, active body and its centre is closer than r_i + r_j + skin [m]; it is
+        inserted in index order (so the row does not depend on the order candidates are offered,
+        unless the row is full). A full row counts the drop in ``out.overflow[0]``. Returns the
+        row's new (kept, dropped) counts."""
+        bj = spheres.body[j]
+        if bj == body_i or spheres.body_active[bj] == 0:  # removed bodies stay where they left, out of play
+            return n_kept, n_dropped
+        d = xi - spheres.position[j]
+        reach = ri + spheres.radius[j] + spheres.skin
+        if wp.dot(d, d) >= reach * reach:
+            return n_kept, n_dropped
+        cap = out.neighbours.capacity
+        if n_kept >= cap:
+            # overflow[0]: entries dropped; overflow[1]: the largest list any sphere needed
+            wp.atomic_add(out.overflow, 0, 1)
+            return n_kept, n_dropped + 1
+        # insertion keeps the list sorted by index
+        row = out.neighbours.index
+        rows = out.neighbours.count.shape[0]
+        k = n_kept
+        while k > 0 and row[entry(i, k - 1, rows, cap)] > j:
+            row[entry(i, k, rows, cap)] = row[entry(i, k - 1, rows, cap)]
+            k -= 1
+        row[entry(i, k, rows, cap)] = j
+        return n_kept + 1, n_dropped
+
+    return add_verlet_candidate
 
 
 @wp.func
@@ -587,31 +733,38 @@ def finish_verlet_row(
     out.neighbours.near_static_wall[i] = near
 
 
-@wp.kernel
-def build_neighbour_list(grid: wp.uint64, spheres: ListSpheres, walls: WallSet, out: VerletBuild):
-    """Verlet list from Warp's hash grid ``grid`` (grouped by world): spheres of the same world
-    and another body within r_i + r_j + skin, sorted by index (:func:`add_verlet_candidate`);
-    and whether a static wall of its world lies within r_i + skin (:func:`near_static_wall`).
-    Valid while no sphere moves more than skin / 2. Does nothing unless ``out.rebuild[0]`` is
-    set, so the launch can sit unconditionally in a CUDA graph. The cell-list search
-    (:mod:`warpdem.stages.cell_list`) builds the same list without the hash grid."""
-    if out.rebuild[0] == 0:
-        return
-    i = wp.tid()
-    xi = spheres.position[i]
-    ri = spheres.radius[i]
-    b = spheres.body[i]
-    world = spheres.world[i]
-    active = spheres.body_active[b]
-    base = i * out.neighbours.capacity
-    n = int(0)
-    n_dropped = int(0)
-    if active != 0:
-        q = wp.hash_grid_query(grid, xi, ri + spheres.max_radius + spheres.skin, world)
-        j = int(0)
-        while wp.hash_grid_query_next(q, j):
-            n, n_dropped = add_verlet_candidate(j, xi, ri, b, base, n, n_dropped, spheres, out)
-    finish_verlet_row(i, xi, ri, active, world, n, n_dropped, spheres, walls, out)
+@functools.lru_cache(maxsize=None)
+def build_neighbour_list_kernel(layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
+    """The hash-grid list kernel (:func:`build_neighbour_list` below) writing the list in
+    ``layout`` (:mod:`warpdem.layouts`), built once per layout."""
+    add_verlet_candidate = verlet_candidate_function(layout)
+
+    @wp.kernel
+    def build_neighbour_list(grid: wp.uint64, spheres: ListSpheres, walls: WallSet, out: VerletBuild):
+        """Verlet list from Warp's hash grid ``grid`` (grouped by world): spheres of the same world
+        and another body within r_i + r_j + skin, sorted by index (:func:`add_verlet_candidate`);
+        and whether a static wall of its world lies within r_i + skin (:func:`near_static_wall`).
+        Valid while no sphere moves more than skin / 2. Does nothing unless ``out.rebuild[0]`` is
+        set, so the launch can sit unconditionally in a CUDA graph. The cell-list search
+        (:mod:`warpdem.stages.cell_list`) builds the same list without the hash grid."""
+        if out.rebuild[0] == 0:
+            return
+        i = wp.tid()
+        xi = spheres.position[i]
+        ri = spheres.radius[i]
+        b = spheres.body[i]
+        world = spheres.world[i]
+        active = spheres.body_active[b]
+        n = int(0)
+        n_dropped = int(0)
+        if active != 0:
+            q = wp.hash_grid_query(grid, xi, ri + spheres.max_radius + spheres.skin, world)
+            j = int(0)
+            while wp.hash_grid_query_next(q, j):
+                n, n_dropped = add_verlet_candidate(j, xi, ri, b, i, n, n_dropped, spheres, out)
+        finish_verlet_row(i, xi, ri, active, world, n, n_dropped, spheres, walls, out)
+
+    return build_neighbour_list
 
 
 @wp.kernel

@@ -8,10 +8,10 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from . import kernels, stages
+from . import kernels, layouts, stages
 from .errors import ConfigError, ContactOverflowError, StabilityError, StabilityWarning
 from .model import Model, State
-from .stages.cell_list import CellList, build_neighbour_list_from_cells
+from .stages.cell_list import CellList, build_neighbour_list_from_cells_kernel
 from .timestep import TimeStepLimits, check_time_step, speed_bound
 
 UNSTABLE_MODES = ("raise", "freeze")
@@ -23,6 +23,14 @@ DEFAULT_NEIGHBOUR_SEARCH = "cell_list"
 # (wear sums on a GPU agree to float rounding: their atomic adds are unordered)
 WALL_STAGES = ("split", "fused")
 DEFAULT_WALL_STAGE = "split"
+# where entry k of sphere i lies in the Verlet list (DEMSolver's neighbour_layout) and in the
+# contact slots (history_layout): i * capacity + k, or k * num_spheres + i (warpdem.layouts);
+# the same results, bit for bit
+SLOT_LAYOUTS = layouts.SLOT_LAYOUTS
+DEFAULT_NEIGHBOUR_LAYOUT = layouts.DEFAULT_SLOT_LAYOUT
+DEFAULT_HISTORY_LAYOUT = layouts.DEFAULT_SLOT_LAYOUT
+# names of the State arrays that hold per-sphere contact slots
+HISTORY_ARRAYS = ("contact_partner", "contact_spring", "contact_roll", "contact_wnormal")
 
 
 class WallStats:
@@ -109,12 +117,31 @@ class DEMSolver:
             one thread). Both give the same body states, bit for bit (on a GPU the per-triangle
             wear sums agree to float rounding: atomic adds in no fixed order). Measured on an H100:
             "fused" is 2 % faster at 1e6 spheres and 4-5 % slower on small drum models.
+        neighbour_layout: where entry k of sphere i lies in the Verlet list: ``"sphere_major"``
+            (default, ``i * max_neighbours + k``) or ``"slot_major"`` (``k * num_spheres + i``: the
+            threads of a warp read consecutive addresses as they walk their lists). Same results,
+            bit for bit; :meth:`neighbour_rows` reads the list in either layout.
+        history_layout: the same choice for the per-sphere contact slots (the States' contact
+            history and this step's wall slots). Same results, bit for bit; checkpoints are saved
+            in the default layout whatever the solver's (:meth:`export_state`, :meth:`import_state`).
+        fused_placement: the integrator's thread per body writes its member spheres' positions
+            and packed views right after it moved the body, so a step launches no placement kernel
+            that reads every body again (default False: a placement launch at the start of each
+            step). The views are then those of the State the last step wrote; the next step places
+            them all itself (one early-exit launch otherwise) on the first step, when a step starts
+            from another State, after :meth:`invalidate_views` (called by :meth:`pause_worlds`,
+            :meth:`import_state`, ``Simulation.remove_outside`` and ``Simulation.invalidate_graph``)
+            and when a list rebuild was requested before the step (:meth:`request_neighbour_rebuild`,
+            or a kernel that sets ``rebuild[0]``). Code that changes a State's bodies between steps
+            some other way must call :meth:`invalidate_views`. Same results, bit for bit.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  neighbour_skin: float | None = None, max_neighbours: int | None = None,
                  conditional_rebuild: bool = False, v_max: float | None = None,
-                 neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH, wall_stage: str = DEFAULT_WALL_STAGE) -> None:
+                 neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH, wall_stage: str = DEFAULT_WALL_STAGE,
+                 neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT, history_layout: str = DEFAULT_HISTORY_LAYOUT,
+                 fused_placement: bool = False) -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
         if neighbour_search not in NEIGHBOUR_SEARCHES:
@@ -123,6 +150,12 @@ class DEMSolver:
         if wall_stage not in WALL_STAGES:
             raise ConfigError(f"wall_stage must be one of {WALL_STAGES}, got {wall_stage!r}")
         self.wall_stage = wall_stage
+        for name, value in (("neighbour_layout", neighbour_layout), ("history_layout", history_layout)):
+            if value not in SLOT_LAYOUTS:
+                raise ConfigError(f"{name} must be one of {SLOT_LAYOUTS}, got {value!r}")
+        self.neighbour_layout = neighbour_layout
+        self.history_layout = history_layout
+        self.fused_placement = bool(fused_placement)
         self.limits: TimeStepLimits = check_time_step(model, dt, v_ref, force)
         self.dt = float(dt)
         self.v_ref = float(v_ref)
@@ -169,6 +202,13 @@ class DEMSolver:
             self.grid = wp.HashGrid(dim, dim, dim, device=d)
         else:
             self.cell_list = CellList(n, self.cell_size, d)
+        self._list_kernel = (kernels.build_neighbour_list_kernel(neighbour_layout) if self.grid is not None
+                             else build_neighbour_list_from_cells_kernel(neighbour_layout))
+        self._integrate = kernels.integrate_bodies_kernel(self.fused_placement)
+        self._isolate = kernels.isolate_unstable_bodies_kernel(self.fused_placement)
+        # fused_placement: [0] != 0 asks the next step to place every sphere (cleared by the integrator)
+        self.place_request = wp.ones(1, dtype=int, device=d)
+        self._views_of: State | None = None  # the State whose spheres the views show (fused_placement)
         self.views = wp.zeros(n, dtype=kernels.SphereView, device=d)
         self.nb_count = wp.zeros(n, dtype=int, device=d)
         self.nb_index = wp.zeros(n * self.max_neighbours, dtype=int, device=d)
@@ -178,7 +218,7 @@ class DEMSolver:
         self.nb_overflow = wp.zeros(2, dtype=int, device=d)  # [dropped, largest list needed]
         self.list_builds = wp.zeros(1, dtype=int, device=d)
         self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
-        self.stages = stages.contact_stages(model.contact_law)
+        self.stages = stages.contact_stages(model.contact_law, neighbour_layout, history_layout)
         self.pack_contact_inputs()
         self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
         # body-force models (warpdem.body_forces): launched after the contacts, summed into one
@@ -211,7 +251,10 @@ class DEMSolver:
             raise ConfigError(f"step: a State of model {bad.model_fingerprint} was given to the solver of "
                               f"model {fp}; make States with this model's model.state()")
         d = m.device
-        self.place_spheres(state_in)
+        if self.fused_placement:
+            self._place_spheres_on_request(state_in)
+        else:
+            self.place_spheres(state_in)
         wp.launch(kernels.flag_moved_spheres, dim=m.num_spheres,
                   inputs=[state_in.sphere_x, self.x_at_build, 0.5 * self.skin, self.rebuild], device=d)
         if self.conditional_rebuild:
@@ -222,16 +265,18 @@ class DEMSolver:
         f_ext, use_ext = self.external_force, self.use_external_force
         if self.body_forces:
             f_ext, use_ext = self.apply_body_forces(state_in, state_out, dt), True
-        wp.launch(kernels.integrate_bodies, dim=m.num_bodies, inputs=[
+        wp.launch(self._integrate, dim=m.num_bodies, inputs=[
             m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
             f_ext, int(use_ext), wp.vec3(*m.gravity), dt,
             state_in.body_active, state_in.body_q, state_in.body_rot, state_in.body_v, state_in.body_w,
             state_out.body_active, state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
-            self.world_paused], device=d)
-        wp.launch(kernels.isolate_unstable_bodies, dim=m.num_bodies, inputs=[
+            self.world_paused, self._members, state_out.sphere_x], device=d)
+        wp.launch(self._isolate, dim=m.num_bodies, inputs=[
             m.body_world, state_out.body_active, state_in.body_q, state_in.body_rot,
             state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
-            self.v_max, self.world_fail, self.world_paused], device=d)
+            self.v_max, self.world_fail, self.world_paused, self._members, state_out.sphere_x], device=d)
+        if self.fused_placement:
+            self._views_of = state_out
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
 
     def _check_step_dt(self, dt: float) -> None:
@@ -268,6 +313,26 @@ class DEMSolver:
             state.body_v, state.body_w, m.body_mass, m.body_inertia, state.body_active, state.sphere_x,
             self.views], device=m.device)
 
+    def _place_spheres_on_request(self, state: State) -> None:
+        """``fused_placement``: the placement launch of a step, which returns at once unless the
+        views are stale (``place_request``) or a list rebuild was asked for before the step; a
+        step from a State other than the one the last step wrote sets the request first."""
+        m = self.model
+        if state is not self._views_of:
+            self.place_request.fill_(1)
+        threads = min(m.num_spheres, kernels.MAX_PLACEMENT_THREADS)
+        wp.launch(kernels.place_sphere_views_on_request, dim=threads, inputs=[
+            self.place_request, self.rebuild, m.num_spheres, threads, m.sphere_body, m.sphere_offset, m.sphere_radius,
+            m.sphere_material, state.body_q, state.body_rot, state.body_v, state.body_w, m.body_mass, m.body_inertia,
+            state.body_active, state.sphere_x, self.views], device=m.device)
+
+    def invalidate_views(self) -> None:
+        """With ``fused_placement``: place every sphere from its State at the start of the next
+        step (call after changing a State's bodies between steps other than through the solver
+        or the Simulation). Without it every step places them anyway: nothing to do."""
+        if self.fused_placement:
+            self.place_request.fill_(1)
+
     def _build_neighbour_list(self, state: State) -> None:
         """Rebuild the Verlet list if ``self.rebuild`` is set (decided on the device).
 
@@ -281,11 +346,11 @@ class DEMSolver:
         walls, build = self._packed.walls, self._verlet_build
         if self.cell_list is not None:
             self.cell_list.build(state.sphere_x, m.sphere_world, m.sphere_body, state.body_active, self.rebuild)
-            wp.launch(build_neighbour_list_from_cells, dim=m.num_spheres,
+            wp.launch(self._list_kernel, dim=m.num_spheres,
                       inputs=[self.cell_list.table, spheres, walls, build], device=m.device)
         else:
             self.grid.build(state.sphere_x, self.cell_size, groups=m.sphere_world)
-            wp.launch(kernels.build_neighbour_list, dim=m.num_spheres, inputs=[self.grid.id, spheres, walls, build],
+            wp.launch(self._list_kernel, dim=m.num_spheres, inputs=[self.grid.id, spheres, walls, build],
                       device=m.device)
         wp.launch(kernels.finish_build, dim=1, inputs=[self.rebuild, self.list_builds], device=m.device)
 
@@ -306,6 +371,7 @@ class DEMSolver:
         m = self.model
         wp.launch(kernels.stop_paused_bodies, dim=m.num_bodies,
                   inputs=[m.body_world, self.world_paused, state.body_v, state.body_w], device=m.device)
+        self.invalidate_views()
 
     def resume_worlds(self) -> None:
         """Release every paused world (it starts again from rest); worlds frozen as unstable
@@ -326,8 +392,36 @@ class DEMSolver:
         return {int(w): causes.get(int(c), f"cause {int(c)}") for w, c in enumerate(codes) if c != 0}
 
     def request_neighbour_rebuild(self) -> None:
-        """Force a list rebuild at the next step (after bodies were added, moved or removed)."""
+        """Force a list rebuild at the next step (after bodies were added, moved or removed; with
+        ``fused_placement`` the step then also places every sphere first)."""
         self.rebuild.fill_(1)
+
+    def neighbour_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """The Verlet list on the host, whatever its layout: entries per sphere (n,) and the
+        entries (n, max_neighbours) (row i: sphere i's neighbours in its first count[i] columns)."""
+        n, cap = self.model.num_spheres, self.max_neighbours
+        index = layouts.to_sphere_major(self.nb_index.numpy(), self.neighbour_layout, n, cap)
+        return self.nb_count.numpy().copy(), index.reshape(n, cap)
+
+    def export_state(self, state: State) -> dict[str, np.ndarray]:
+        """``state.to_numpy()`` with the contact slots in the default layout (what checkpoints
+        hold, whatever this solver's ``history_layout``)."""
+        data = state.to_numpy()
+        n, k = self.model.num_spheres, self.model.max_contacts
+        for name in HISTORY_ARRAYS:
+            data[name] = layouts.to_sphere_major(data[name], self.history_layout, n, k)
+        return data
+
+    def import_state(self, state: State, data: dict[str, np.ndarray], fingerprint: str | None = None) -> None:
+        """Load arrays of :meth:`export_state` (default slot layout) into ``state`` in this
+        solver's layout (``fingerprint``: as in :meth:`State.load_numpy`)."""
+        n, k = self.model.num_spheres, self.model.max_contacts
+        data = dict(data)
+        for name in HISTORY_ARRAYS:
+            if name in data:
+                data[name] = layouts.from_sphere_major(data[name], self.history_layout, n, k)
+        state.load_numpy(data, fingerprint=fingerprint)
+        self.invalidate_views()
 
     def pack_contact_inputs(self) -> None:
         """Pack the model's and the solver's arrays that the contact stages and the
@@ -375,6 +469,12 @@ class DEMSolver:
         forces.force = self.sphere_f
         forces.torque = self.sphere_t
         self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces)
+        members = kernels.MemberPlacement()
+        members.first, members.count = m.body_first, m.body_count
+        members.mass, members.inertia = m.body_mass, m.body_inertia
+        members.offset, members.radius, members.material = m.sphere_offset, m.sphere_radius, m.sphere_material
+        members.views, members.request = self.views, self.place_request
+        self._members = members  # read only with fused_placement
         build = kernels.VerletBuild()
         build.neighbours = neighbours  # a copy of the struct (its array references): pack it filled
         build.x_at_build = self.x_at_build
@@ -540,21 +640,25 @@ class Simulation:
     On CUDA the inner loop is captured once in a CUDA graph (``steps_per_graph`` steps,
     even so that the state parity is preserved) and replayed. The solver options
     (``neighbour_skin``, ``max_neighbours``, ``conditional_rebuild``, ``v_max``,
-    ``neighbour_search``, ``wall_stage``) are passed to :class:`DEMSolver`.
+    ``neighbour_search``, ``wall_stage``, ``neighbour_layout``, ``history_layout``,
+    ``fused_placement``) are passed to :class:`DEMSolver`.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
                  use_graph: bool | None = None, steps_per_graph: int = 20, neighbour_skin: float | None = None,
                  max_neighbours: int | None = None, conditional_rebuild: bool = False,
                  v_max: float | None = None, neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH,
-                 wall_stage: str = DEFAULT_WALL_STAGE) -> None:
+                 wall_stage: str = DEFAULT_WALL_STAGE, neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT,
+                 history_layout: str = DEFAULT_HISTORY_LAYOUT, fused_placement: bool = False) -> None:
         self.model = model
         # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
         # "freeze" (the world stays frozen and is listed, the others run on)
         self.on_unstable = "raise"
         self.solver = DEMSolver(model, dt, v_ref=v_ref, force=force, neighbour_skin=neighbour_skin,
                                 max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild,
-                                v_max=v_max, neighbour_search=neighbour_search, wall_stage=wall_stage)
+                                v_max=v_max, neighbour_search=neighbour_search, wall_stage=wall_stage,
+                                neighbour_layout=neighbour_layout, history_layout=history_layout,
+                                fused_placement=fused_placement)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0
@@ -577,8 +681,9 @@ class Simulation:
 
     def invalidate_graph(self) -> None:
         """Call after replacing model arrays that a captured graph refers to (also repacks the
-        contact stages' structs)."""
+        contact stages' structs; with ``fused_placement`` the next step places every sphere)."""
         self.solver.pack_contact_inputs()
+        self.solver.invalidate_views()
         self._graph = None
 
     def failed_worlds(self) -> dict[int, str]:
@@ -671,6 +776,7 @@ class Simulation:
         wp.launch(kernels.deactivate_outside, dim=m.num_bodies,
                   inputs=[self.state.body_q, wp.vec3(*lower), wp.vec3(*upper), self.state.body_active, removed],
                   device=m.device)
+        self.solver.invalidate_views()
         return int(removed.numpy()[0])
 
     def pause_worlds(self, worlds) -> None:

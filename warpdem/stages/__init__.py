@@ -32,10 +32,11 @@ from dataclasses import dataclass
 import warp as wp
 
 from ..contact.law import ContactLaw
+from ..layouts import DEFAULT_SLOT_LAYOUT
 from .particle_contacts import particle_forces_kernel
 from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
                       WallSlots, WearAccumulators)
-from .wall_contacts import collect_wall_contacts, wall_stage_kernels
+from .wall_contacts import collect_wall_contacts_kernel, wall_stage_kernels
 
 __all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", "ContactParameters", "NeighbourList",
            "SphereForces", "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
@@ -67,8 +68,11 @@ class PackedInputs:
 
 
 @functools.lru_cache(maxsize=None)
-def contact_stages(law: ContactLaw) -> ContactStages:
-    """The stage kernels of ``law`` (built once per law and cached)."""
-    walls = wall_stage_kernels(law)
-    return ContactStages(collect_wall_contacts, walls.wall_forces, particle_forces_kernel(law),
+def contact_stages(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
+                   history_layout: str = DEFAULT_SLOT_LAYOUT) -> ContactStages:
+    """The stage kernels of ``law`` for the layouts of the neighbour list and of the contact
+    slots (:mod:`warpdem.layouts`; built once per combination and cached)."""
+    walls = wall_stage_kernels(law, history_layout)
+    return ContactStages(collect_wall_contacts_kernel(history_layout), walls.wall_forces,
+                         particle_forces_kernel(law, neighbour_layout, history_layout),
                          walls.collect_wall_contacts_and_forces)

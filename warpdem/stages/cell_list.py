@@ -27,16 +27,19 @@ Build (each launch returns at once unless ``rebuild[0]``):
 4. scatter: each sphere is written at ``bucket_start[bucket] + rank`` (no atomics).
 
 The order within a bucket follows the atomics (not deterministic on a GPU), but the list
-kernel (:data:`build_neighbour_list_from_cells`) inserts each neighbour in index order
-(:func:`warpdem.kernels.add_verlet_candidate`, shared with the hash-grid kernel), so the list
+kernel (:func:`build_neighbour_list_from_cells_kernel`) inserts each neighbour in index order
+(:func:`warpdem.kernels.verlet_candidate_function`, shared with the hash-grid kernel), so the list
 is the same as the hash grid's, entry for entry, unless a row overflows (an error anyway).
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import warp as wp
 
-from ..kernels import ListSpheres, VerletBuild, WallSet, add_verlet_candidate, finish_verlet_row
+from ..kernels import ListSpheres, VerletBuild, WallSet, finish_verlet_row, verlet_candidate_function
+from ..layouts import DEFAULT_SLOT_LAYOUT
 
 wp.set_module_options({"enable_backward": False, "fast_math": True})
 
@@ -223,43 +226,51 @@ def scatter_spheres(
         sorted_cell[slot] = sphere_cell[i]
 
 
-@wp.kernel
-def build_neighbour_list_from_cells(table: CellTable, spheres: ListSpheres, walls: WallSet, out: VerletBuild):
-    """Verlet list from the cell list ``table``: the same outputs as
-    :data:`warpdem.kernels.build_neighbour_list` (spheres of the same world and another, active
-    body within r_i + r_j + skin, sorted by index; near static wall; build position; overflow),
-    with the candidates taken from the cells that the box x_i +- (r_i + r_max + skin) [m]
-    touches (3 per axis at most for r_i = r_max, as cell_size = 2 r_max + skin; the box is
-    widened by a hair against float rounding). Does nothing unless ``out.rebuild[0]``."""
-    if out.rebuild[0] == 0:
-        return
-    i = wp.tid()
-    xi = spheres.position[i]
-    ri = spheres.radius[i]
-    b = spheres.body[i]
-    world = spheres.world[i]
-    active = spheres.body_active[b]
-    base = i * out.neighbours.capacity
-    n = int(0)
-    n_dropped = int(0)
-    if active != 0:
-        reach = ri + spheres.max_radius + spheres.skin
-        h = table.cell_size
-        pad = wp.vec3(reach * (1.0 + QUERY_PAD)) + wp.vec3(wp.abs(xi[0]), wp.abs(xi[1]), wp.abs(xi[2])) * COORD_ROUNDING
-        lo = cell_of(xi - pad, world, h)
-        hi = cell_of(xi + pad, world, h)
-        for cz in range(lo[2], hi[2] + 1):
-            for cy in range(lo[1], hi[1] + 1):
-                for cx in range(lo[0], hi[0] + 1):
-                    cell = wp.vec4i(cx, cy, cz, world)
-                    bucket = bucket_of(cell, table.bucket_mask)
-                    start = table.bucket_start[bucket]
-                    for slot in range(start, start + table.bucket_count[bucket]):
-                        if not (table.sorted_cell[slot] == cell):  # another cell or world in this bucket
-                            continue
-                        n, n_dropped = add_verlet_candidate(table.sorted_sphere[slot], xi, ri, b, base, n, n_dropped,
-                                                            spheres, out)
-    finish_verlet_row(i, xi, ri, active, world, n, n_dropped, spheres, walls, out)
+@functools.lru_cache(maxsize=None)
+def build_neighbour_list_from_cells_kernel(layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
+    """The cell-list list kernel (:func:`build_neighbour_list_from_cells` below) writing the list
+    in ``layout`` (:mod:`warpdem.layouts`), built once per layout."""
+    add_verlet_candidate = verlet_candidate_function(layout)
+
+    @wp.kernel
+    def build_neighbour_list_from_cells(table: CellTable, spheres: ListSpheres, walls: WallSet, out: VerletBuild):
+        """Verlet list from the cell list ``table``: the same outputs as
+        :func:`warpdem.kernels.build_neighbour_list_kernel` (spheres of the same world and another,
+        active body within r_i + r_j + skin, sorted by index; near static wall; build position;
+        overflow), with the candidates taken from the cells that the box x_i +- (r_i + r_max + skin)
+        [m] touches (3 per axis at most for r_i = r_max, as cell_size = 2 r_max + skin; the box is
+        widened by a hair against float rounding). Does nothing unless ``out.rebuild[0]``."""
+        if out.rebuild[0] == 0:
+            return
+        i = wp.tid()
+        xi = spheres.position[i]
+        ri = spheres.radius[i]
+        b = spheres.body[i]
+        world = spheres.world[i]
+        active = spheres.body_active[b]
+        n = int(0)
+        n_dropped = int(0)
+        if active != 0:
+            reach = ri + spheres.max_radius + spheres.skin
+            h = table.cell_size
+            pad = wp.vec3(reach * (1.0 + QUERY_PAD)) + wp.vec3(wp.abs(xi[0]), wp.abs(xi[1]),
+                                                               wp.abs(xi[2])) * COORD_ROUNDING
+            lo = cell_of(xi - pad, world, h)
+            hi = cell_of(xi + pad, world, h)
+            for cz in range(lo[2], hi[2] + 1):
+                for cy in range(lo[1], hi[1] + 1):
+                    for cx in range(lo[0], hi[0] + 1):
+                        cell = wp.vec4i(cx, cy, cz, world)
+                        bucket = bucket_of(cell, table.bucket_mask)
+                        start = table.bucket_start[bucket]
+                        for slot in range(start, start + table.bucket_count[bucket]):
+                            if not (table.sorted_cell[slot] == cell):  # another cell or world in this bucket
+                                continue
+                            n, n_dropped = add_verlet_candidate(table.sorted_sphere[slot], xi, ri, b, i, n,
+                                                                n_dropped, spheres, out)
+        finish_verlet_row(i, xi, ri, active, world, n, n_dropped, spheres, walls, out)
+
+    return build_neighbour_list_from_cells
 
 
 def bucket_count_for(num_spheres: int) -> int:
@@ -281,7 +292,7 @@ class CellList:
             (the query skips the other cells' entries), never a wrong list.
 
     Every launch's size is fixed here, so :meth:`build` (and the list kernel
-    :data:`build_neighbour_list_from_cells` over ``table``) can be captured once in a CUDA graph
+    :func:`build_neighbour_list_from_cells_kernel` over ``table``) can be captured once in a CUDA graph
     and replayed whatever ``rebuild[0]`` holds.
     """
 

@@ -9,6 +9,7 @@ import warp as wp
 from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
 from ..kernels import damping_mass_function, effective_shear_modulus, effective_youngs_modulus
+from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
 from .law import law_evaluator
 from .structs import ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSlots
 
@@ -16,8 +17,10 @@ wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 
 @functools.lru_cache(maxsize=None)
-def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
-    """Stage 3 of one contact law (built and cached per law), one thread per sphere.
+def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
+                           history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
+    """Stage 3 of one contact law (built and cached per law and layouts of the neighbour list and
+    the contact history, :mod:`warpdem.layouts`), one thread per sphere.
 
     Full neighbour list (each pair is evaluated from both sides, so sphere i writes only its
     own row: no atomics, deterministic). For each neighbour j of another body within
@@ -34,12 +37,15 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
     evaluate = law_evaluator(law)
     damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     roll_hist = bool(law.needs_rolling_history)
+    nb_entry = entry_function(neighbour_layout)  # compiled in: where entry k of sphere i lies
+    slot = entry_function(history_layout)
 
     @wp.kernel
     def particle_forces(spheres: SphereSet, neighbours: NeighbourList, params: ContactParameters, step: StepInputs,
                         history: ContactHistory, contacts: ContactHistory, found: WallSlots, forces: SphereForces):
         i = wp.tid()
-        base = i * contacts.slots
+        rows = contacts.count.shape[0]
+        slots = contacts.slots
         me = spheres.view[i]
         if me.r < 0.0:
             contacts.count[i] = 0
@@ -52,11 +58,12 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
             n_keep = history.count[i]
             contacts.count[i] = n_keep
             for s in range(n_keep):
-                contacts.partner[base + s] = history.partner[base + s]
-                contacts.spring[base + s] = history.spring[base + s]
+                e = slot(i, s, rows, slots)
+                contacts.partner[e] = history.partner[e]
+                contacts.spring[e] = history.spring[e]
                 if wp.static(roll_hist):
-                    contacts.roll[base + s] = history.roll[base + s]
-                contacts.wall_normal[base + s] = history.wall_normal[base + s]
+                    contacts.roll[e] = history.roll[e]
+                contacts.wall_normal[e] = history.wall_normal[e]
             forces.force[i] = wp.vec3(0.0)
             forces.torque[i] = wp.vec3(0.0)
             return
@@ -78,9 +85,9 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
             if n_new > 0:
                 f_sum = forces.force[i]
                 t_sum = forces.torque[i]
-        nb_base = i * neighbours.capacity
+        nb_rows = neighbours.count.shape[0]
         for nb in range(neighbours.count[i]):
-            j = neighbours.index[nb_base + nb]
+            j = neighbours.index[nb_entry(i, nb, nb_rows, neighbours.capacity)]
             other = spheres.view[j]
             rj = other.r
             if rj < 0.0:
@@ -101,10 +108,11 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
             spring = wp.vec3(0.0)
             roll = wp.vec3(0.0)
             for o in range(n_old):
-                if history.partner[base + o] == j:
-                    spring = history.spring[base + o]
+                e_old = slot(i, o, rows, slots)
+                if history.partner[e_old] == j:
+                    spring = history.spring[e_old]
                     if wp.static(roll_hist):
-                        roll = history.roll[base + o]
+                        roll = history.roll[e_old]
             arm_i = ri - 0.5 * overlap
             cp = xi - arm_i * nrm
             xbj = other.xb
@@ -132,10 +140,11 @@ def particle_forces_kernel(law: ContactLaw) -> "wp.Kernel":
             force = fn * nrm + ft
             f_sum = f_sum + force
             t_sum = t_sum + wp.cross(cp - xb, force) + tr
-            contacts.partner[base + n_new] = j
-            contacts.spring[base + n_new] = spring_new
+            e_new = slot(i, n_new, rows, slots)
+            contacts.partner[e_new] = j
+            contacts.spring[e_new] = spring_new
             if wp.static(roll_hist):
-                contacts.roll[base + n_new] = roll_new
+                contacts.roll[e_new] = roll_new
             n_new += 1
         contacts.count[i] = n_new
         forces.force[i] = f_sum

@@ -51,8 +51,9 @@ class StepInputs:
 class ContactHistory:
     """Per-sphere contact slots of one State: this step's (out) or last step's (in).
 
-    Slot ``s`` of sphere ``i`` is entry ``i * slots + s``; wall contacts come first, then
-    particle contacts in neighbour-list order."""
+    Slot ``s`` of sphere ``i`` is entry ``i * slots + s`` (the default layout) or
+    ``s * num_spheres + i`` (``history_layout="slot_major"``, :mod:`warpdem.layouts`); wall
+    contacts come first, then particle contacts in neighbour-list order."""
 
     count: wp.array(dtype=int)  # used slots per sphere
     partner: wp.array(dtype=int)  # sphere index >= 0, or -(wall + 1) for a wall

@@ -22,6 +22,7 @@ from ..contact.law import ContactLaw
 from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, closest_point_triangle, effective_shear_modulus,
                        damping_mass_function, effective_youngs_modulus, point_in_wall_rest_frame, wall_is_moving,
                        wall_point_velocity)
+from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
 from .law import law_evaluator
 from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
                       WallSlots, WearAccumulators)
@@ -29,135 +30,154 @@ from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereFo
 wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 
-@wp.func
-def collect_sphere_wall_contacts(i: int, spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
-                                 step: StepInputs, contacts: ContactHistory, found: WallSlots) -> int:
-    """The wall contacts of sphere i at the step's time; returns how many (slots 0 .. n - 1).
+@functools.lru_cache(maxsize=None)
+def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Function":
+    """:func:`collect_sphere_wall_contacts` for the contact slots' ``history_layout``
+    (:mod:`warpdem.layouts`), built once per layout."""
+    entry = entry_function(history_layout)  # compiled in: where slot s of sphere i lies
 
-    The closest feature of every triangle within the sphere's radius (rest-frame BVH query)
-    is a candidate. A candidate and a collected contact describe one contact if their normals
-    agree (cosine > WALL_MERGE_COS), or if the shallower one's contact point lies on (or
-    behind) the deeper one's tangent plane: an edge/vertex of a neighbouring triangle touched
-    "through" a face the sphere already presses on (coplanar or convex neighbours). The deeper
-    one is kept. Concave corners (floor and side wall) stick out of each other's planes and
-    stay two contacts. Writes the wall tag -(k + 1) and normal into this step's history
-    (``contacts``: slots 0 .. n - 1) and the point, depth and triangle into ``found``; a
-    contact beyond the slots counts into ``step.overflow``. Spheres of inactive bodies or
-    paused worlds get none (the particle stage handles them); a sphere that is neither near a
-    static wall (list build) nor in a world with a moving wall is decided without reading its
-    state. ``found.count`` is left to the caller (the stage-1 kernel or the fused wall stage)."""
-    world = spheres.world[i]
-    close_to_static_wall = neighbours.near_static_wall[i]
-    first_wall = walls.world_start[world]
-    n_walls = walls.world_start[world + 1] - first_wall
-    # most spheres of a bed are far from every static wall: decided without reading the sphere
-    any_wall = close_to_static_wall
-    for kk in range(n_walls):
-        any_wall = any_wall + walls.moving[walls.world_index[first_wall + kk]]
-    if any_wall == 0 or step.world_paused[world] != 0:
-        return 0
-    me = spheres.view[i]
-    if me.r < 0.0:
-        return 0
-    base = i * contacts.slots
-    max_contacts = contacts.slots
-    xi = me.x
-    ri = me.r
-    t_now = step.time[0]
-    n_new = int(0)
-    for kk in range(n_walls):
-        k = walls.world_index[first_wall + kk]
-        moving = walls.moving[k]
-        if moving == 0 and close_to_static_wall == 0:
-            continue
-        mesh = walls.mesh[k]
-        tag = -(k + 1)
-        ext = wp.vec3(ri, ri, ri)
-        # the sphere in the wall's rest frame (static walls: the same point)
-        rot = wp.quat_identity()
-        c_now = wp.vec3(0.0)
-        c_rest = wp.vec3(0.0)
-        x_rest = xi
-        if moving != 0:
-            c_rest = walls.origin[k]
-            x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, walls.t_start[k], walls.t_stop[k], c_rest,
-                                                          walls.lin_vel[k], walls.ang_vel[k])
-        mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
-        tri = int(0)
-        while wp.mesh_query_aabb_next(mquery, tri):
-            m = wp.mesh_get(mesh)
-            pa = m.points[m.indices[3 * tri + 0]]
-            pb = m.points[m.indices[3 * tri + 1]]
-            pc = m.points[m.indices[3 * tri + 2]]
-            cp = closest_point_triangle(x_rest, pa, pb, pc)
-            d = x_rest - cp
-            dist = wp.length(d)
-            if dist >= ri or dist < 1.0e-12:
+    @wp.func
+    def collect_sphere_wall_contacts(i: int, spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
+                                     step: StepInputs, contacts: ContactHistory, found: WallSlots) -> int:
+        """The wall contacts of sphere i at the step's time; returns how many (slots 0 .. n - 1).
+
+        The closest feature of every triangle within the sphere's radius (rest-frame BVH query)
+        is a candidate. A candidate and a collected contact describe one contact if their normals
+        agree (cosine > WALL_MERGE_COS), or if the shallower one's contact point lies on (or
+        behind) the deeper one's tangent plane: an edge/vertex of a neighbouring triangle touched
+        "through" a face the sphere already presses on (coplanar or convex neighbours). The deeper
+        one is kept. Concave corners (floor and side wall) stick out of each other's planes and
+        stay two contacts. Writes the wall tag -(k + 1) and normal into this step's history
+        (``contacts``: slots 0 .. n - 1) and the point, depth and triangle into ``found``; a
+        contact beyond the slots counts into ``step.overflow``. Spheres of inactive bodies or
+        paused worlds get none (the particle stage handles them); a sphere that is neither near a
+        static wall (list build) nor in a world with a moving wall is decided without reading its
+        state. ``found.count`` is left to the caller (the stage-1 kernel or the fused wall stage)."""
+        world = spheres.world[i]
+        close_to_static_wall = neighbours.near_static_wall[i]
+        first_wall = walls.world_start[world]
+        n_walls = walls.world_start[world + 1] - first_wall
+        # most spheres of a bed are far from every static wall: decided without reading the sphere
+        any_wall = close_to_static_wall
+        for kk in range(n_walls):
+            any_wall = any_wall + walls.moving[walls.world_index[first_wall + kk]]
+        if any_wall == 0 or step.world_paused[world] != 0:
+            return 0
+        me = spheres.view[i]
+        if me.r < 0.0:
+            return 0
+        rows = contacts.count.shape[0]
+        max_contacts = contacts.slots
+        xi = me.x
+        ri = me.r
+        t_now = step.time[0]
+        n_new = int(0)
+        for kk in range(n_walls):
+            k = walls.world_index[first_wall + kk]
+            moving = walls.moving[k]
+            if moving == 0 and close_to_static_wall == 0:
                 continue
-            nrm = d / dist
-            if moving != 0:  # back to the world frame
-                nrm = wp.quat_rotate(rot, nrm)
-                cp = c_now + wp.quat_rotate(rot, cp - c_rest)
-            depth = ri - dist
-            keep = int(1)
-            tol = 1.0e-3 * ri
-            for s in range(n_new):
-                tag_s = contacts.partner[base + s]
-                if tag_s == SLOT_EMPTY:
+            mesh = walls.mesh[k]
+            tag = -(k + 1)
+            ext = wp.vec3(ri, ri, ri)
+            # the sphere in the wall's rest frame (static walls: the same point)
+            rot = wp.quat_identity()
+            c_now = wp.vec3(0.0)
+            c_rest = wp.vec3(0.0)
+            x_rest = xi
+            if moving != 0:
+                c_rest = walls.origin[k]
+                x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, walls.t_start[k], walls.t_stop[k], c_rest,
+                                                              walls.lin_vel[k], walls.ang_vel[k])
+            mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
+            tri = int(0)
+            while wp.mesh_query_aabb_next(mquery, tri):
+                m = wp.mesh_get(mesh)
+                pa = m.points[m.indices[3 * tri + 0]]
+                pb = m.points[m.indices[3 * tri + 1]]
+                pc = m.points[m.indices[3 * tri + 2]]
+                cp = closest_point_triangle(x_rest, pa, pb, pc)
+                d = x_rest - cp
+                dist = wp.length(d)
+                if dist >= ri or dist < 1.0e-12:
                     continue
-                n_s = contacts.wall_normal[base + s]
-                p_s = found.point[base + s]
-                d_s = found.depth[base + s]
-                related = int(0)
-                if wp.dot(n_s, nrm) > WALL_MERGE_COS:
-                    related = 1
-                if d_s >= depth and wp.dot(cp - p_s, n_s) <= tol:
-                    related = 1
-                if depth > d_s and wp.dot(p_s - cp, nrm) <= tol:
-                    related = 1
-                if related == 1:
-                    if d_s >= depth:
-                        keep = 0
-                    else:
-                        contacts.partner[base + s] = SLOT_EMPTY
-            if keep == 1:
-                # reuse a slot emptied above (many triangles meeting at a vertex must not
-                # exhaust the slots with replaced candidates), else append
-                slot = n_new
+                nrm = d / dist
+                if moving != 0:  # back to the world frame
+                    nrm = wp.quat_rotate(rot, nrm)
+                    cp = c_now + wp.quat_rotate(rot, cp - c_rest)
+                depth = ri - dist
+                keep = int(1)
+                tol = 1.0e-3 * ri
                 for s in range(n_new):
-                    if slot == n_new and contacts.partner[base + s] == SLOT_EMPTY:
-                        slot = s
-                if slot < max_contacts:
-                    contacts.partner[base + slot] = tag
-                    contacts.wall_normal[base + slot] = nrm
-                    found.depth[base + slot] = depth
-                    found.point[base + slot] = cp
-                    found.triangle[base + slot] = tri
-                    if slot == n_new:
-                        n_new += 1
-                else:
-                    wp.atomic_add(step.overflow, 0, 1)
-    # compact the slots (drop the ones replaced by deeper related contacts)
-    n_kept = int(0)
-    for s in range(n_new):
-        if contacts.partner[base + s] != SLOT_EMPTY:
-            if n_kept != s:
-                contacts.partner[base + n_kept] = contacts.partner[base + s]
-                contacts.wall_normal[base + n_kept] = contacts.wall_normal[base + s]
-                found.depth[base + n_kept] = found.depth[base + s]
-                found.point[base + n_kept] = found.point[base + s]
-                found.triangle[base + n_kept] = found.triangle[base + s]
-            n_kept += 1
-    return n_kept
+                    e = entry(i, s, rows, max_contacts)
+                    tag_s = contacts.partner[e]
+                    if tag_s == SLOT_EMPTY:
+                        continue
+                    n_s = contacts.wall_normal[e]
+                    p_s = found.point[e]
+                    d_s = found.depth[e]
+                    related = int(0)
+                    if wp.dot(n_s, nrm) > WALL_MERGE_COS:
+                        related = 1
+                    if d_s >= depth and wp.dot(cp - p_s, n_s) <= tol:
+                        related = 1
+                    if depth > d_s and wp.dot(p_s - cp, nrm) <= tol:
+                        related = 1
+                    if related == 1:
+                        if d_s >= depth:
+                            keep = 0
+                        else:
+                            contacts.partner[e] = SLOT_EMPTY
+                if keep == 1:
+                    # reuse a slot emptied above (many triangles meeting at a vertex must not
+                    # exhaust the slots with replaced candidates), else append
+                    slot = n_new
+                    for s in range(n_new):
+                        if slot == n_new and contacts.partner[entry(i, s, rows, max_contacts)] == SLOT_EMPTY:
+                            slot = s
+                    if slot < max_contacts:
+                        e = entry(i, slot, rows, max_contacts)
+                        contacts.partner[e] = tag
+                        contacts.wall_normal[e] = nrm
+                        found.depth[e] = depth
+                        found.point[e] = cp
+                        found.triangle[e] = tri
+                        if slot == n_new:
+                            n_new += 1
+                    else:
+                        wp.atomic_add(step.overflow, 0, 1)
+        # compact the slots (drop the ones replaced by deeper related contacts)
+        n_kept = int(0)
+        for s in range(n_new):
+            e = entry(i, s, rows, max_contacts)
+            if contacts.partner[e] != SLOT_EMPTY:
+                if n_kept != s:
+                    e_kept = entry(i, n_kept, rows, max_contacts)
+                    contacts.partner[e_kept] = contacts.partner[e]
+                    contacts.wall_normal[e_kept] = contacts.wall_normal[e]
+                    found.depth[e_kept] = found.depth[e]
+                    found.point[e_kept] = found.point[e]
+                    found.triangle[e_kept] = found.triangle[e]
+                n_kept += 1
+        return n_kept
+
+    return collect_sphere_wall_contacts
 
 
-@wp.kernel
-def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet, step: StepInputs,
-                          contacts: ContactHistory, found: WallSlots):
-    """Stage 1, one thread per sphere: :func:`collect_sphere_wall_contacts` of sphere i, its
-    count into ``found.count`` (0 for spheres without wall contacts)."""
-    i = wp.tid()
-    found.count[i] = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
+@functools.lru_cache(maxsize=None)
+def collect_wall_contacts_kernel(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
+    """Stage 1 (:func:`collect_wall_contacts` below) for ``history_layout``, built once per layout."""
+    collect_sphere_wall_contacts = wall_collection_function(history_layout)
+
+    @wp.kernel
+    def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet, step: StepInputs,
+                              contacts: ContactHistory, found: WallSlots):
+        """Stage 1, one thread per sphere: :func:`collect_sphere_wall_contacts` of sphere i, its
+        count into ``found.count`` (0 for spheres without wall contacts)."""
+        i = wp.tid()
+        found.count[i] = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
+
+    return collect_wall_contacts
 
 
 @wp.func
@@ -184,8 +204,9 @@ class WallStageKernels:
 
 
 @functools.lru_cache(maxsize=None)
-def wall_stage_kernels(law: ContactLaw) -> WallStageKernels:
-    """The wall-force kernels of one contact law (built and cached per law), one thread per sphere.
+def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOUT) -> WallStageKernels:
+    """The wall-force kernels of one contact law (built and cached per law and layout of the
+    contact slots, :mod:`warpdem.layouts`), one thread per sphere.
 
     Both call ``wall_forces_of_sphere`` (compiled per law): for each wall contact that stage 1
     found: last step's history of the same wall is taken if its normal agrees (cosine >
@@ -201,6 +222,8 @@ def wall_stage_kernels(law: ContactLaw) -> WallStageKernels:
     damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     track_wear = bool(law.track_wear)
     roll_hist = bool(law.needs_rolling_history)
+    entry = entry_function(history_layout)  # compiled in: where slot s of sphere i lies
+    collect_sphere_wall_contacts = wall_collection_function(history_layout)
 
     @wp.func
     def wall_forces_of_sphere(i: int, n_found: int, spheres: SphereSet, walls: WallSet, params: ContactParameters,
@@ -210,7 +233,8 @@ def wall_stage_kernels(law: ContactLaw) -> WallStageKernels:
         0 .. n_found - 1 of ``contacts``/``found``."""
         me = spheres.view[i]
         world = spheres.world[i]
-        base = i * contacts.slots
+        rows = contacts.count.shape[0]
+        slots = contacts.slots
         xi = me.x
         ri = me.r
         xb = me.xb
@@ -224,19 +248,21 @@ def wall_stage_kernels(law: ContactLaw) -> WallStageKernels:
         f_sum = wp.vec3(0.0)
         t_sum = wp.vec3(0.0)
         for s in range(n_found):
-            tag = contacts.partner[base + s]
+            e = entry(i, s, rows, slots)
+            tag = contacts.partner[e]
             kw = -tag - 1
-            nrm = contacts.wall_normal[base + s]
-            cp = found.point[base + s]
-            depth = found.depth[base + s]
+            nrm = contacts.wall_normal[e]
+            cp = found.point[e]
+            depth = found.depth[e]
             spring = wp.vec3(0.0)
             roll = wp.vec3(0.0)
             for o in range(n_old):
-                if history.partner[base + o] == tag:
-                    if wp.dot(history.wall_normal[base + o], nrm) > WALL_MATCH_COS:
-                        spring = history.spring[base + o]
+                e_old = entry(i, o, rows, slots)
+                if history.partner[e_old] == tag:
+                    if wp.dot(history.wall_normal[e_old], nrm) > WALL_MATCH_COS:
+                        spring = history.spring[e_old]
                         if wp.static(roll_hist):
-                            roll = history.roll[base + o]
+                            roll = history.roll[e_old]
             # wall kinematics at the contact point
             v_wall = wall_point_velocity(t_now, walls.t_start[kw], walls.t_stop[kw], walls.origin[kw],
                                          walls.lin_vel[kw], walls.ang_vel[kw], cp)
@@ -266,12 +292,12 @@ def wall_stage_kernels(law: ContactLaw) -> WallStageKernels:
             force = fn * nrm + ft
             f_sum = f_sum + force
             t_sum = t_sum + wp.cross(cp - xb, force) + tr
-            contacts.spring[base + s] = spring_new
+            contacts.spring[e] = spring_new
             if wp.static(roll_hist):
-                contacts.roll[base + s] = roll_new
+                contacts.roll[e] = roll_new
             if wp.static(track_wear):
-                entry = world * wear.triangles_per_world + walls.tri_offset[kw] + found.triangle[base + s]
-                accumulate_wear(wear, entry, fn, ft, c.v_rel, nrm, dt)
+                tri_entry = world * wear.triangles_per_world + walls.tri_offset[kw] + found.triangle[e]
+                accumulate_wear(wear, tri_entry, fn, ft, c.v_rel, nrm, dt)
         forces.force[i] = f_sum
         forces.torque[i] = t_sum
 
