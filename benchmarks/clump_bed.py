@@ -105,6 +105,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--order", default="morton", choices=["morton", "grouped"], help="memory order of the bodies")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     t0 = time.perf_counter()
     model, width, counts = build(args.bodies, args.worlds, args.rolling, device, args.max_contacts, args.fill,

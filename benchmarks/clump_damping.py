@@ -44,6 +44,7 @@ def main(argv=None) -> int:
     ap.add_argument("--processes", default="auto")
     args = ap.parse_args(argv)
     wp.config.quiet = True  # stdout carries only the JSON lines
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     material = BulkMaterial.from_config(ROD_MATERIAL if args.scale == "paper" else ROD_MATERIAL_QUICK)
     per_fill: dict[tuple[str, float], list[float | None]] = {}
     for convention in args.conventions:

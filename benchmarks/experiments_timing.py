@@ -71,6 +71,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--progress", action="store_true")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or str(wp.get_preferred_device())
     names = list(EXPERIMENTS) if args.experiment == "all" else [args.experiment]
     extra = json.loads(args.settings)

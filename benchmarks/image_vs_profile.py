@@ -43,6 +43,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--save-dir", default=None, help="write each pile (positions, radii, h_fill) as .npz here")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     extra = {} if MATERIALS[args.material] is None else {"material": MATERIALS[args.material]()}
     exp = make_experiment("baffle", args.scale, fill_per_world=True, seed=args.seed, **extra)
     rng = np.random.default_rng(args.seed)

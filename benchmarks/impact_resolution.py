@@ -156,6 +156,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rolling", default="epsd2", help="rolling sub-model (none: no rolling resistance)")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     rows = []
     for tangential in args.tangential:
         law = wd.ContactLaw(tangential=tangential, rolling=args.rolling)

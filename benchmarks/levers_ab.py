@@ -44,6 +44,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, args.max_contacts, args.order)
     sims = {}

@@ -81,6 +81,7 @@ def main(argv=None):
     ap.add_argument("--load-state", default=None, metavar="NPZ", help="start from this settled State")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
     sim = wd.Simulation(model, 5e-5, steps_per_graph=50, neighbour_search=args.neighbour_search,

@@ -93,6 +93,7 @@ def main(argv=None):
                     help="the integrator places the member spheres (no placement launch per step)")
     args = ap.parse_args(argv)
     wp.config.quiet = True
+    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)

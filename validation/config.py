@@ -2,7 +2,7 @@
 
 Every problem is reported at once with its path in the file (``parameters.mu_s_pp``,
 ``diagnosis.replicates``), then the model is checked against the engine's declarations
-(parameter names, admissible bounds, effect names). Example: ``validation/configs/quick_diagnosis.yaml``.
+(parameter names, admissible bounds, effect names). Example: ``validation/configs/first_diagnosis.yaml``.
 
 .. code-block:: yaml
 
