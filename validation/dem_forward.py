@@ -24,6 +24,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from calibration.experiments import EXPERIMENTS, make_experiment
+from calibration.experiments.checkpoints import BatchCheckpoints
 from calibration.materials import BulkMaterial
 from calibration.model_description import ModelDescription
 from warpdem import ConfigError
@@ -77,6 +78,11 @@ class DEMForwardModel(ForwardModel):
             version then shares one contact law and material, so the designs of all versions run
             in one launch per experiment and share one cache. Needs at most one candidate per
             kind; ``"auto"``: on when that holds.
+        checkpoint_every_s: wall seconds [s] between batch checkpoints of a DEM launch, kept in
+            ``<cache stem>_checkpoints/`` beside the cache (:class:`calibration.experiments.BatchCheckpoints`),
+            so a launch cut short (a time-limited GPU call, Ctrl-C) continues where it stopped when
+            the same request comes again (the cache has not grown, so the launch draws the same
+            fills and matches its checkpoint); None, or no cache: no checkpoints.
     """
 
     def __init__(self, base: ModelDescription, base_material: BulkMaterial | None, effects: Sequence[DEMEffect],
@@ -85,7 +91,7 @@ class DEMForwardModel(ForwardModel):
                  fixed: Mapping[str, float] | None = None, device: str | None = None,
                  processes: int | str | None = "auto", cache: str | Path | None = None,
                  progress: bool = False, proposals: Sequence[ProposedMeasurement] = (),
-                 superset: bool | str = "auto") -> None:
+                 superset: bool | str = "auto", checkpoint_every_s: float | None = 120.0) -> None:
         self.base = base
         self.base_material = base_material
         self.effects = {e.name: e for e in effects}
@@ -104,6 +110,8 @@ class DEMForwardModel(ForwardModel):
         self.progress = progress
         self._proposals = tuple(proposals)
         self.cache_path = Path(cache) if cache is not None else None
+        self.checkpoints = None if self.cache_path is None or checkpoint_every_s is None else BatchCheckpoints(
+            self.cache_path.parent / f"{self.cache_path.stem}_checkpoints", float(checkpoint_every_s))
         self._cache: dict[str, dict[str, Any]] = {}
         kinds = [e.kind for e in effects]
         mergeable = len(set(kinds)) == len(kinds)
@@ -316,7 +324,8 @@ class DEMForwardModel(ForwardModel):
         t0 = time.perf_counter()
         print(f"DEM: {exp_name} {dict(settings) or ''}, {len(sets)} world(s) of {desc.contact_law.describe()}, "
               f"{desc.material.name} ...", file=sys.stderr, flush=True)
-        results = exp.run(sets, device=self.device, progress=self.progress, processes=self.processes)
+        results = exp.run(sets, device=self.device, progress=self.progress, processes=self.processes,
+                          checkpoints=self.checkpoints)
         wall = time.perf_counter() - t0
         print(f"DEM: {exp_name}: {len(sets)} world(s) in {wall:.1f} s", file=sys.stderr, flush=True)
         self.dem_seconds += wall
