@@ -13,8 +13,12 @@ The designs a diagnosis runs up front (``designs_up_front``, :func:`validation.d
 are its first request, so those of several measurement sets go into one call, where the designs
 they share (the same model, settings and seeds) run once.
 
-The pooling is deterministic: a merged call holds exactly the requests that the live workers
-make before they next wait, whatever the threads' timing, so a pooled run reproduces itself.
+A merged call holds the requests that the live workers make before they next wait. Within one
+diagnosis (its candidates as workers) that is reproducible. With several diagnoses in one process it is
+not quite: when a diagnosis's candidate threads finish there is a moment before its own thread counts as
+a worker again, and the other diagnoses' waiting requests may be served without it, so the number of
+launches varies (5-8 seen for three measurement sets, 2026-11-27); every number of the results is the
+same, since each world is its own cache record.
 """
 
 from __future__ import annotations
