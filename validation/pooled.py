@@ -17,8 +17,9 @@ A merged call holds the requests that the live workers make before they next wai
 diagnosis (its candidates as workers) that is reproducible. With several diagnoses in one process it is
 not quite: when a diagnosis's candidate threads finish there is a moment before its own thread counts as
 a worker again, and the other diagnoses' waiting requests may be served without it, so the number of
-launches varies (5-8 seen for three measurement sets, 2026-11-27); every number of the results is the
-same, since each world is its own cache record.
+launches varies (5-8 seen for three measurement sets on the analytic test model, 2026-11-27, with the
+same numbers). With the DEM a world's fill is numbered by the cache's length when its launch starts, so
+another grouping draws other fills from an empty cache: results then move within the fill-to-fill noise.
 """
 
 from __future__ import annotations
