@@ -157,95 +157,14 @@ def sphere_view(x: wp.vec3, radius: float, material: int, xb: wp.vec3, v: wp.vec
     return sv
 
 
-@wp.func
-def place_sphere(
-    i: int,
-    sphere_body: wp.array(dtype=int),
-    sphere_offset: wp.array(dtype=wp.vec3),
-    sphere_radius: wp.array(dtype=float),
-    sphere_material: wp.array(dtype=int),
-    body_q: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.quat),
-    body_v: wp.array(dtype=wp.vec3),
-    body_w: wp.array(dtype=wp.vec3),
-    body_mass: wp.array(dtype=float),
-    body_inertia: wp.array(dtype=wp.vec3),
-    body_active: wp.array(dtype=int),
-    sphere_x: wp.array(dtype=wp.vec3),
-    views: wp.array(dtype=SphereView),
-):
-    """Sphere i's position from its body's pose, and its packed :class:`SphereView`."""
-    b = sphere_body[i]
-    xb = body_q[b]
-    x = xb + wp.quat_rotate(body_rot[b], sphere_offset[i])
-    sphere_x[i] = x
-    views[i] = sphere_view(x, sphere_radius[i], sphere_material[i], xb, body_v[b], body_w[b], body_mass[b],
-                           body_inertia[b], body_active[b])
-
-
-@wp.kernel
-def place_sphere_views(
-    sphere_body: wp.array(dtype=int),
-    sphere_offset: wp.array(dtype=wp.vec3),
-    sphere_radius: wp.array(dtype=float),
-    sphere_material: wp.array(dtype=int),
-    body_q: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.quat),
-    body_v: wp.array(dtype=wp.vec3),
-    body_w: wp.array(dtype=wp.vec3),
-    body_mass: wp.array(dtype=float),
-    body_inertia: wp.array(dtype=wp.vec3),
-    body_active: wp.array(dtype=int),
-    sphere_x: wp.array(dtype=wp.vec3),
-    views: wp.array(dtype=SphereView),
-):
-    """Sphere positions from body poses, and each sphere's packed :class:`SphereView`."""
-    place_sphere(wp.tid(), sphere_body, sphere_offset, sphere_radius, sphere_material, body_q, body_rot, body_v,
-                 body_w, body_mass, body_inertia, body_active, sphere_x, views)
-
-
-# threads of the grid-stride placement launch of ``fused_placement`` (an early exit on most steps)
-MAX_PLACEMENT_THREADS = 1 << 16
-
-
-@wp.kernel
-def place_sphere_views_on_request(
-    request: wp.array(dtype=int),
-    rebuild: wp.array(dtype=int),
-    num_spheres: int,
-    stride: int,
-    sphere_body: wp.array(dtype=int),
-    sphere_offset: wp.array(dtype=wp.vec3),
-    sphere_radius: wp.array(dtype=float),
-    sphere_material: wp.array(dtype=int),
-    body_q: wp.array(dtype=wp.vec3),
-    body_rot: wp.array(dtype=wp.quat),
-    body_v: wp.array(dtype=wp.vec3),
-    body_w: wp.array(dtype=wp.vec3),
-    body_mass: wp.array(dtype=float),
-    body_inertia: wp.array(dtype=wp.vec3),
-    body_active: wp.array(dtype=int),
-    sphere_x: wp.array(dtype=wp.vec3),
-    views: wp.array(dtype=SphereView),
-):
-    """:func:`place_sphere_views` (grid-stride, ``stride`` = the launch's thread count) only if
-    ``request[0]`` (the views are not this State's: first step, a State changed between steps) or
-    ``rebuild[0]`` (a list rebuild asked for before the step: bodies were added, moved or removed)
-    is set; else every thread returns at once. With ``fused_placement`` the integrator places the
-    spheres of the State it writes (:func:`integrate_bodies_kernel`) and clears ``request``."""
-    if request[0] == 0 and rebuild[0] == 0:
-        return
-    for i in range(wp.tid(), num_spheres, stride):
-        place_sphere(i, sphere_body, sphere_offset, sphere_radius, sphere_material, body_q, body_rot, body_v, body_w,
-                     body_mass, body_inertia, body_active, sphere_x, views)
-
-
 @wp.struct
 class MemberPlacement:
-    """What the integrator needs to place a body's member spheres right after it moved the body
-    (``DEMSolver(fused_placement=True)``): the model's bodies and spheres, the packed views, and
-    the device flag that asks the next step to place every sphere itself."""
+    """What places spheres from their bodies: the model's bodies and spheres, the packed views, and
+    the device flag that asks the next step to place every sphere itself. Read by the placement
+    launches and, with ``DEMSolver(fused_placement=True)``, by the integrator right after it moved
+    a body."""
 
+    body: wp.array(dtype=int)  # body of each sphere (Model.sphere_body)
     first: wp.array(dtype=int)  # first member sphere of each body (Model.body_first)
     count: wp.array(dtype=int)  # member spheres of each body (Model.body_count)
     mass: wp.array(dtype=float)  # body mass [kg]
@@ -255,6 +174,48 @@ class MemberPlacement:
     material: wp.array(dtype=int)  # sphere material index
     views: wp.array(dtype=SphereView)  # the solver's packed views (of the State just written)
     request: wp.array(dtype=int)  # [0] != 0: the views are stale, the next step places them all
+
+
+@wp.func
+def place_sphere(i: int, members: MemberPlacement, body_q: wp.array(dtype=wp.vec3), body_rot: wp.array(dtype=wp.quat),
+                 body_v: wp.array(dtype=wp.vec3), body_w: wp.array(dtype=wp.vec3), body_active: wp.array(dtype=int),
+                 sphere_x: wp.array(dtype=wp.vec3)):
+    """Sphere i's position from its body's pose, and its packed :class:`SphereView`."""
+    b = members.body[i]
+    xb = body_q[b]
+    x = xb + wp.quat_rotate(body_rot[b], members.offset[i])
+    sphere_x[i] = x
+    members.views[i] = sphere_view(x, members.radius[i], members.material[i], xb, body_v[b], body_w[b],
+                                   members.mass[b], members.inertia[b], body_active[b])
+
+
+@wp.kernel
+def place_sphere_views(members: MemberPlacement, body_q: wp.array(dtype=wp.vec3), body_rot: wp.array(dtype=wp.quat),
+                       body_v: wp.array(dtype=wp.vec3), body_w: wp.array(dtype=wp.vec3),
+                       body_active: wp.array(dtype=int), sphere_x: wp.array(dtype=wp.vec3)):
+    """Sphere positions from body poses, and each sphere's packed :class:`SphereView`."""
+    place_sphere(wp.tid(), members, body_q, body_rot, body_v, body_w, body_active, sphere_x)
+
+
+# threads of the grid-stride placement launch of ``fused_placement`` (an early exit on most steps)
+MAX_PLACEMENT_THREADS = 1 << 16
+
+
+@wp.kernel
+def place_sphere_views_on_request(rebuild: wp.array(dtype=int), num_spheres: int, stride: int,
+                                  members: MemberPlacement, body_q: wp.array(dtype=wp.vec3),
+                                  body_rot: wp.array(dtype=wp.quat), body_v: wp.array(dtype=wp.vec3),
+                                  body_w: wp.array(dtype=wp.vec3), body_active: wp.array(dtype=int),
+                                  sphere_x: wp.array(dtype=wp.vec3)):
+    """:func:`place_sphere_views` (grid-stride, ``stride`` = the launch's thread count) only if
+    ``members.request[0]`` (the views are not this State's: first step, a State changed between
+    steps) or ``rebuild[0]`` (a list rebuild asked for before the step: bodies were added, moved or
+    removed) is set; else every thread returns at once. With ``fused_placement`` the integrator
+    places the spheres of the State it writes (:func:`integrate_bodies_kernel`) and clears the request."""
+    if members.request[0] == 0 and rebuild[0] == 0:
+        return
+    for i in range(wp.tid(), num_spheres, stride):
+        place_sphere(i, members, body_q, body_rot, body_v, body_w, body_active, sphere_x)
 
 
 @wp.func

@@ -309,9 +309,8 @@ class DEMSolver:
         """Sphere positions (``state.sphere_x``) and packed views from the body poses."""
         m = self.model
         wp.launch(kernels.place_sphere_views, dim=m.num_spheres, inputs=[
-            m.sphere_body, m.sphere_offset, m.sphere_radius, m.sphere_material, state.body_q, state.body_rot,
-            state.body_v, state.body_w, m.body_mass, m.body_inertia, state.body_active, state.sphere_x,
-            self.views], device=m.device)
+            self._members, state.body_q, state.body_rot, state.body_v, state.body_w, state.body_active,
+            state.sphere_x], device=m.device)
 
     def _place_spheres_on_request(self, state: State) -> None:
         """``fused_placement``: the placement launch of a step, which returns at once unless the
@@ -322,9 +321,8 @@ class DEMSolver:
             self.place_request.fill_(1)
         threads = min(m.num_spheres, kernels.MAX_PLACEMENT_THREADS)
         wp.launch(kernels.place_sphere_views_on_request, dim=threads, inputs=[
-            self.place_request, self.rebuild, m.num_spheres, threads, m.sphere_body, m.sphere_offset, m.sphere_radius,
-            m.sphere_material, state.body_q, state.body_rot, state.body_v, state.body_w, m.body_mass, m.body_inertia,
-            state.body_active, state.sphere_x, self.views], device=m.device)
+            self.rebuild, m.num_spheres, threads, self._members, state.body_q, state.body_rot, state.body_v,
+            state.body_w, state.body_active, state.sphere_x], device=m.device)
 
     def invalidate_views(self) -> None:
         """With ``fused_placement``: place every sphere from its State at the start of the next
@@ -470,11 +468,11 @@ class DEMSolver:
         forces.torque = self.sphere_t
         self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces)
         members = kernels.MemberPlacement()
-        members.first, members.count = m.body_first, m.body_count
+        members.body, members.first, members.count = m.sphere_body, m.body_first, m.body_count
         members.mass, members.inertia = m.body_mass, m.body_inertia
         members.offset, members.radius, members.material = m.sphere_offset, m.sphere_radius, m.sphere_material
         members.views, members.request = self.views, self.place_request
-        self._members = members  # read only with fused_placement
+        self._members = members
         build = kernels.VerletBuild()
         build.neighbours = neighbours  # a copy of the struct (its array references): pack it filled
         build.x_at_build = self.x_at_build
