@@ -48,6 +48,8 @@ import warp as wp
 from .base import ContactInput, ParameterSpec, SubModel, register
 
 SQRT_5_6 = math.sqrt(5.0 / 6.0)
+#: the sliding friction both tangential sub-models declare (a parameter two sub-models share must be declared identically)
+MU_S = ParameterSpec("mu_s", "-", 0.5, (0.0, 10.0), "sliding (static) friction coefficient")
 
 
 @wp.func
@@ -86,9 +88,7 @@ class HertzNormal(SubModel):
 class MindlinTangential(SubModel):
     kind = "tangential"
     name = "mindlin"
-    parameters = (
-        ParameterSpec("mu_s", "-", 0.5, (0.0, 10.0), "sliding (static) friction coefficient"),
-    )
+    parameters = (MU_S,)
     needs_history = True
     # This text enters every record's and DEM-cache key's fingerprint, so it stays as written when
     # this was the default; the sliding rule is Luding's reset, not LIGGGHTS' (that is ``history``).
@@ -129,9 +129,7 @@ class MindlinTangential(SubModel):
 class HistoryTangential(SubModel):
     kind = "tangential"
     name = "history"
-    parameters = (
-        ParameterSpec("mu_s", "-", 0.5, (0.0, 10.0), "sliding (static) friction coefficient"),
-    )
+    parameters = (MU_S,)
     needs_history = True
     reference = ("Mindlin & Deresiewicz (1953); seed paper eqs. (4)-(8); LIGGGHTS tangential history "
                  "(src/tangential_model_history.h): elastic force capped at mu |F_n|, no damping while sliding")
