@@ -2,38 +2,24 @@
 checkpoint when the same request comes again: the cache has not grown, so the launch draws the
 same fills and matches its checkpoint, and the observables equal those of an uncut launch. CPU,
 a tiny quick-scale hollow-cylinder batch of 2 worlds (a few seconds)."""
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-import warpdem as wd
-from calibration.experiments import checkpoints
-from calibration.model_description import ModelDescription
-from validation.dem_forward import DEMForwardModel, ObservableSpec
+sys.path.insert(0, str(Path(__file__).parent))
+from test_batch_checkpoint import SETS, TINY_CYL, Killed, count_steps, kill_after_save  # noqa: E402
 
-TINY_CYL = dict(fill_mass=1.5, lift_speed=0.5, max_time_after_lift=0.2, min_pile_layers=0.0)
-SETS = [dict(mu_s_pp=0.3, mu_s_pw=0.3), dict(mu_s_pp=0.6, mu_s_pw=0.5)]
+from calibration.model_description import ModelDescription  # noqa: E402
+from validation.dem_forward import DEMForwardModel, ObservableSpec  # noqa: E402
+
 KEYS = ("pile",)
-
-
-def count_steps(monkeypatch) -> list:
-    """Count the steps every ``Simulation.run`` advances."""
-    steps = [0]
-    plain_run = wd.Simulation.run
-
-    def run(self, n, *args, **kwargs):
-        steps[0] += int(n)
-        return plain_run(self, n, *args, **kwargs)
-
-    monkeypatch.setattr(wd.Simulation, "run", run)
-    return steps
-
-
-class Killed(BaseException):
-    """Stands for a kill right after a checkpoint was written."""
+SETTINGS = {k: v for k, v in TINY_CYL.items() if k != "fill_per_world"}  # the forward model sets it
 
 
 def forward(cache, every_s=0.3):
-    spec = ObservableSpec("pile", "cylinder", "pile_angle", TINY_CYL)
+    spec = ObservableSpec("pile", "cylinder", "pile_angle", SETTINGS)
     return DEMForwardModel(ModelDescription.from_config({"contact_law": {"rolling": "none"}}), None, [], [spec],
                            scale="quick", device="cpu", processes=1, cache=cache, checkpoint_every_s=every_s)
 
@@ -45,16 +31,7 @@ def test_cut_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     cache = tmp_path / "cut" / "dem_runs.jsonl"
     fm = forward(cache)
     assert fm.checkpoints.folder == tmp_path / "cut" / "dem_runs_checkpoints"
-    plain_save = checkpoints.BatchCheckpoint.save
-    saves = []
-
-    def save(self, ctx, inner):
-        plain_save(self, ctx, inner)
-        saves.append(ctx.sim.steps)
-        if len(saves) == 2:
-            raise Killed()
-
-    monkeypatch.setattr(checkpoints.BatchCheckpoint, "save", save)
+    saves = kill_after_save(monkeypatch, 2)
     with pytest.raises(Killed):
         fm.evaluate((), SETS, 1, KEYS)
     monkeypatch.undo()
@@ -64,7 +41,7 @@ def test_cut_launch_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     steps = count_steps(monkeypatch)
     got = again.evaluate((), SETS, 1, KEYS)
     np.testing.assert_array_equal(got, reference)  # bitwise on the CPU
-    assert steps[0] == full[0] - saves[-1] > 0  # continued from the checkpoint, not started over
+    assert steps[0] == full[0] - saves[-1][1] > 0  # continued from the checkpoint, not started over
     assert list(again.checkpoints.folder.iterdir()) == []
 
 
