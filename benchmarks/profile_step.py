@@ -25,8 +25,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
-                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+from warpdem.bench_settled_bed import add_solver_options, solver_options
 
 from settled_bed import build, load_settled_state, min_bytes_per_sphere_step  # noqa: E402  (run from benchmarks/)
 from step_cost import kernel_breakdown  # noqa: E402
@@ -67,26 +66,14 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=50)
     ap.add_argument("--rolling", default="epsd")
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
-    ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
-                    help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
-    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
-                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
-    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
-                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
-    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
-    ap.add_argument("--fused-placement", action="store_true",
-                    help="the integrator places the member spheres (no placement launch per step)")
+    add_solver_options(ap)
     ap.add_argument("--load-state", default=None, metavar="NPZ", help="start from this settled State")
     args = ap.parse_args(argv)
     wp.config.quiet = True
     wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
-    sim = wd.Simulation(model, 5e-5, steps_per_graph=50, neighbour_search=args.neighbour_search,
-                        wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
-                        history_layout=args.history_layout, fused_placement=args.fused_placement)
+    sim = wd.Simulation(model, 5e-5, steps_per_graph=50, **solver_options(args))
     if args.load_state:
         load_settled_state(args.load_state, sim)
         sim.run(200, check_every=200)
@@ -142,9 +129,7 @@ def main(argv=None):
     bytes_per_sphere = min_bytes_per_sphere_step(k_avg)
     ms = stages["full_step"]
     out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order,
-               neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
-               neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
-               fused_placement=args.fused_placement,
+               **solver_options(args),
                state_from=args.load_state or f"{args.settle_time} s settled here", contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))

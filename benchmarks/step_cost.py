@@ -22,8 +22,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
-                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+from warpdem.bench_settled_bed import add_solver_options, solver_options
 
 PER_DRUM = 950  # a loose lattice holds ~950 in the drum's lower part (the paper fill settles to 1,648)
 DT = 8.2599588e-05
@@ -80,35 +79,21 @@ def main(argv=None):
     ap.add_argument("--device", default=None)
     ap.add_argument("--spheres", type=int, nargs="+", default=[2000, 20000, 200000])
     ap.add_argument("--steps", type=int, default=2000)
-    ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
-                    help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
-    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
-                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
-    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
-                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
-    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
-    ap.add_argument("--fused-placement", action="store_true",
-                    help="the integrator places the member spheres (no placement launch per step)")
+    add_solver_options(ap)
     args = ap.parse_args(argv)
     wp.config.quiet = True
     wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)
-        sim = wd.Simulation(model, DT, force=True, neighbour_search=args.neighbour_search,
-                            wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
-                            history_layout=args.history_layout, fused_placement=args.fused_placement)
+        sim = wd.Simulation(model, DT, force=True, **solver_options(args))
         sim.run(2000, check_every=2000)  # let the lattice collapse first
         graph_ms = per_step_ms(sim, args.steps, device)
         sim.use_graph = False
         plain_ms = per_step_ms(sim, max(50, args.steps // 10), device)
         kernels = kernel_breakdown(sim, 50) if wp.get_device(device).is_cuda else {}
         print(json.dumps(dict(case="drum-step-cost", device=wp.get_device(device).name, spheres=model.num_spheres,
-                              worlds=worlds, neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
-                              neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
-                              fused_placement=args.fused_placement,
+                              worlds=worlds, **solver_options(args),
                               graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
                               sphere_steps_per_s=float(f"{model.num_spheres / (graph_ms * 1e-3):.3g}"),
                               list_builds=int(sim.solver.list_builds.numpy()[0]), kernels_ms_per_step=kernels,

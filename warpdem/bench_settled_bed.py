@@ -39,6 +39,29 @@ D = 0.018
 R = D / 2
 
 
+def add_solver_options(ap: argparse.ArgumentParser) -> None:
+    """The solver's performance options as command-line flags (shared by the engine benchmarks)."""
+    ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
+                    help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
+    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
+                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
+    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
+                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
+    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
+                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
+    ap.add_argument("--fused-placement", action="store_true",
+                    help="the integrator places the member spheres (no placement launch per step)")
+
+
+def solver_options(args: argparse.Namespace) -> dict:
+    """The :class:`warpdem.Simulation` keyword arguments of :func:`add_solver_options`'s flags."""
+    return dict(neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
+                neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
+                fused_placement=args.fused_placement)
+
+
+
 def loose_fill(n: int, width: float, rng: np.random.Generator, spacing: float = 1.06 * D) -> np.ndarray:
     """Jittered cubic lattice of n centres filling a width x width column from the floor up."""
     per_row = int((width - D) // spacing)
@@ -144,17 +167,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--no-graph", action="store_true")
     ap.add_argument("--conditional-rebuild", action="store_true", help="skip the grid build on steps without a list rebuild")
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"], help="memory order of the spheres")
-    ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
-                    help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
-    ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
-                    help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
-    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
-                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
-    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
-    ap.add_argument("--fused-placement", action="store_true",
-                    help="the integrator places the member spheres (no placement launch per step)")
+    add_solver_options(ap)
     ap.add_argument("--save-state", default=None, metavar="NPZ",
                     help="save the settled State here (before the warm-up)")
     ap.add_argument("--load-state", default=None, metavar="NPZ",
@@ -165,9 +178,7 @@ def main(argv=None) -> dict:
     t0 = time.perf_counter()
     model, width = build(args.spheres, args.worlds, args.rolling, device, args.max_contacts, args.order)
     sim = wd.Simulation(model, 5.0e-5, use_graph=None if not args.no_graph else False, steps_per_graph=50,
-                        conditional_rebuild=args.conditional_rebuild, neighbour_search=args.neighbour_search,
-                        wall_stage=args.wall_stage, neighbour_layout=args.neighbour_layout,
-                        history_layout=args.history_layout, fused_placement=args.fused_placement)
+                        conditional_rebuild=args.conditional_rebuild, **solver_options(args))
     t_build = time.perf_counter() - t0
     if args.load_state:
         t0 = time.perf_counter()
