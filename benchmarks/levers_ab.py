@@ -23,12 +23,14 @@ import warpdem as wd
 
 from settled_bed import build, load_settled_state  # noqa: E402  (run from benchmarks/)
 
-VARIANTS = {
-    "default": {},
-    "neighbour_slot_major": dict(neighbour_layout="slot_major"),
-    "history_slot_major": dict(history_layout="slot_major"),
-    "fused_placement": dict(fused_placement=True),
+OFF = dict(neighbour_layout="sphere_major", history_layout="sphere_major", fused_placement=False)
+VARIANTS = {  # every lever off, each alone, all; "default" is "auto" (all on a GPU, none on the CPU)
+    "off": OFF,
+    "neighbour_slot_major": {**OFF, "neighbour_layout": "slot_major"},
+    "history_slot_major": {**OFF, "history_layout": "slot_major"},
+    "fused_placement": {**OFF, "fused_placement": True},
     "all": dict(neighbour_layout="slot_major", history_layout="slot_major", fused_placement=True),
+    "default": {},
 }
 
 

@@ -45,12 +45,16 @@ fi
 command -v nvidia-smi > /dev/null \
   && nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv >> "$log" 2>&1
 
-ALL="--neighbour-layout slot_major --history-layout slot_major --fused-placement"
+# every lever off, each alone on top of that, all; "default" is the solver's "auto" (on a GPU all on,
+# since 2026-11-27; before that every lever was off by default)
+OFF_FLAGS="--neighbour-layout sphere_major --history-layout sphere_major --fused-placement off"
+ALL="--neighbour-layout slot_major --history-layout slot_major --fused-placement on"
 declare -A LEVER=(
+  [off]="$OFF_FLAGS"
   [default]=""
-  [neighbour_slot_major]="--neighbour-layout slot_major"
-  [history_slot_major]="--history-layout slot_major"
-  [fused_placement]="--fused-placement"
+  [neighbour_slot_major]="--neighbour-layout slot_major --history-layout sphere_major --fused-placement off"
+  [history_slot_major]="--neighbour-layout sphere_major --history-layout slot_major --fused-placement off"
+  [fused_placement]="--neighbour-layout sphere_major --history-layout sphere_major --fused-placement on"
   [all]="$ALL"
 )
 
@@ -84,7 +88,7 @@ phase pytest layout 240 60 $py -m pytest -q -p no:cacheprovider -m gpu tests/tes
 bed="benchmarks/settled_bed.py --spheres $spheres --device $device"
 phase settled_bed default_settled_here 300 90 $py $bed --settle-time "$settle_time" --save-state "$state"
 if [ -f "$state" ]; then
-  for v in default neighbour_slot_major history_slot_major fused_placement all default; do
+  for v in off neighbour_slot_major history_slot_major fused_placement all default off; do
     # shellcheck disable=SC2086  # the lever flags are words
     phase settled_bed "$v" 120 30 $py $bed --load-state "$state" ${LEVER[$v]}
   done
@@ -97,14 +101,14 @@ if [ -f "$state" ]; then
 fi
 
 # 3. small models, many steps
-for v in default all; do
+for v in off default; do
   # shellcheck disable=SC2086
   phase step_cost "$v" 150 60 $py benchmarks/step_cost.py --device "$device" --spheres $step_cost_spheres ${LEVER[$v]}
 done
 
 # 4. where the step goes, per kernel (CUDA activity timing), from the same settled State
 if [ -f "$state" ]; then
-  for v in default all; do
+  for v in off default; do
     # shellcheck disable=SC2086
     phase profile_step "$v" 120 40 $py benchmarks/profile_step.py --spheres "$spheres" --device "$device" \
       --load-state "$state" ${LEVER[$v]}

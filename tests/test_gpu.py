@@ -169,7 +169,7 @@ def test_cuda_turning_drums_match_cpu():
 # atol 1e-9 (tests/test_contact_stages.py's tolerance) and a warning names the arrays that
 # differ in the last bits.
 LAYOUT_SCENES = ["drum", "clumps", "wear", "drum_settle", "drum_unstable"]  # two contact laws: few kernels to compile
-LAYOUT_LEVERS = ["neighbour_slot_major", "history_slot_major", "fused_placement", "all"]
+LAYOUT_LEVERS = ["neighbour_slot_major", "history_slot_major", "fused_placement", "all", "default"]
 
 
 @pytest.fixture(scope="module")
@@ -200,12 +200,12 @@ def test_cuda_layout_levers_match_the_default(name, lever, layout_kernels, monke
     import warnings
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from test_layout_levers import LEVERS, RUNS, run_with
+    from test_layout_levers import LEVERS, OFF, RUNS, run_with
 
-    if name not in _cuda_default:
-        _cuda_default[name] = run_with(RUNS[name], {}, "cuda", monkeypatch, use_graph=True)
+    if name not in _cuda_default:  # every lever off (on CUDA "auto" turns them all on: lever "default")
+        _cuda_default[name] = run_with(RUNS[name], OFF, "cuda", monkeypatch, use_graph=True)
     want = _cuda_default[name]
-    got = run_with(RUNS[name], LEVERS[lever], "cuda", monkeypatch, use_graph=True)
+    got = run_with(RUNS[name], LEVERS.get(lever, {}), "cuda", monkeypatch, use_graph=True)
     assert int(want["contact_count"].sum()) > 0
     assert got.keys() == want.keys()
     not_bitwise = []

@@ -31,10 +31,12 @@ from warpdem import geometry, layouts
 sys.path.insert(0, str(Path(__file__).parent))
 from test_contact_stages import SCENES, run_scene  # noqa: E402
 
+# every lever off (the CPU's "auto"), and each lever alone or all on top of that
+OFF = dict(neighbour_layout="sphere_major", history_layout="sphere_major", fused_placement=False)
 LEVERS = {
-    "neighbour_slot_major": dict(neighbour_layout="slot_major"),
-    "history_slot_major": dict(history_layout="slot_major"),
-    "fused_placement": dict(fused_placement=True),
+    "neighbour_slot_major": {**OFF, "neighbour_layout": "slot_major"},
+    "history_slot_major": {**OFF, "history_layout": "slot_major"},
+    "fused_placement": {**OFF, "fused_placement": True},
     "all": dict(neighbour_layout="slot_major", history_layout="slot_major", fused_placement=True),
 }
 
@@ -190,15 +192,22 @@ def test_checkpoints_load_across_layouts(tmp_path, save_with, load_with):
 
 def test_unknown_layout_is_a_config_error():
     model = SCENES["wear"]().model
-    with pytest.raises(wd.ConfigError, match=r"neighbour_layout must be one of \('sphere_major', 'slot_major'\)"):
+    with pytest.raises(wd.ConfigError, match=r"neighbour_layout must be one of \('sphere_major', 'slot_major', 'auto'\)"):
         wd.DEMSolver(model, 1e-6, force=True, neighbour_layout="row_major")
     with pytest.raises(wd.ConfigError, match="history_layout"):
         wd.Simulation(model, 1e-6, force=True, use_graph=False, history_layout="transposed")
 
 
-def test_defaults_are_off():
+def test_auto_defaults_by_device():
+    """"auto" (the default): every lever off on the CPU, all on on a GPU; explicit values pass."""
     s = SCENES["wear"]().solver
     assert (s.neighbour_layout, s.history_layout, s.fused_placement) == ("sphere_major", "sphere_major", False)
+    assert wd.resolve_performance_options(False) == ("sphere_major", "sphere_major", False)
+    assert wd.resolve_performance_options(True) == ("slot_major", "slot_major", True)
+    assert wd.resolve_performance_options(True, "sphere_major", "auto", "off") == ("sphere_major", "slot_major", False)
+    assert wd.resolve_performance_options(False, fused_placement="on")[2] is True
+    with pytest.raises(wd.ConfigError, match="fused_placement must be True, False or one of"):
+        wd.resolve_performance_options(True, fused_placement="sometimes")
 
 
 # ----------------------------------------------------------------------------- pump code that reads slots

@@ -32,8 +32,9 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
-from warpdem.solver import (DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT, DEFAULT_NEIGHBOUR_SEARCH,
-                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+from warpdem.solver import (DEFAULT_FUSED_PLACEMENT, DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT,
+                            DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS,
+                            WALL_STAGES)
 
 D = 0.018
 R = D / 2
@@ -45,13 +46,15 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                     help=f"candidate search of the Verlet list (default {DEFAULT_NEIGHBOUR_SEARCH})")
     ap.add_argument("--wall-stage", default=DEFAULT_WALL_STAGE, choices=list(WALL_STAGES),
                     help=f"wall contacts and forces as two kernels or one (default {DEFAULT_WALL_STAGE})")
-    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=list(SLOT_LAYOUTS),
-                    help="Verlet list entry k of sphere i at i * capacity + k or k * n + i "
-                         f"(default {DEFAULT_NEIGHBOUR_LAYOUT})")
-    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=list(SLOT_LAYOUTS),
+    ap.add_argument("--neighbour-layout", default=DEFAULT_NEIGHBOUR_LAYOUT, choices=["auto", *SLOT_LAYOUTS],
+                    help="Verlet list entry k of sphere i at i * capacity + k (sphere_major) or k * n + i "
+                         f"(slot_major; default {DEFAULT_NEIGHBOUR_LAYOUT}: slot_major on a GPU)")
+    ap.add_argument("--history-layout", default=DEFAULT_HISTORY_LAYOUT, choices=["auto", *SLOT_LAYOUTS],
                     help=f"the same for the contact slots (default {DEFAULT_HISTORY_LAYOUT})")
-    ap.add_argument("--fused-placement", action="store_true",
-                    help="the integrator places the member spheres (no placement launch per step)")
+    ap.add_argument("--fused-placement", nargs="?", const="on", default=DEFAULT_FUSED_PLACEMENT,
+                    choices=["auto", "on", "off"],
+                    help="the integrator places the member spheres, no placement launch per step (bare "
+                         f"flag: on; default {DEFAULT_FUSED_PLACEMENT}: on on a GPU)")
 
 
 def solver_options(args: argparse.Namespace) -> dict:
