@@ -51,12 +51,14 @@ def test_diagnosis_reads_only_the_measurement_file_and_resumes_from_its_cache(ti
 
 def test_config_errors_listed_with_their_paths(tmp_path, capsys):
     cfg = {"measurements": "nope.yaml", "parameters": {"mu_s_pp": [0.1, 0.9]},
-           "diagnosis": {"replicates": 1, "sede": 3}, "candidats": "default", "scale": "huge"}
+           "diagnosis": {"replicates": 1, "sede": 3, "replicated_fraction": 0}, "candidats": "default",
+           "scale": "huge"}
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump(cfg))
     assert diagnose_main([str(path)]) == 2
     err = capsys.readouterr().err
-    for what in ("diagnosis.replicates", "diagnosis.sede: unknown key", "candidats: unknown key", "scale"):
+    for what in ("diagnosis.replicates", "diagnosis.sede: unknown key", "diagnosis.replicated_fraction",
+                 "candidats: unknown key", "scale"):
         assert what in err, err
     assert "Traceback" not in err
     cfg = {"measurements": "nope.yaml", "parameters": {"mu_s_pp": [0.1, 0.9]}}

@@ -25,6 +25,7 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
     proposals: auto                   # conditions to forecast when candidates tie, or a list
     diagnosis: {replicates: 2}        # validation.settings.DiagnosisSettings fields, e.g.
                                       # designs_up_front: auto (true | false): every design in one call
+                                      # replicated_fraction: 1.0 (0.34: a third of the sets replicated)
 """
 from __future__ import annotations
 
@@ -64,6 +65,7 @@ class DiagnosisSection(_Strict):
     design_points_per_parameter: int = Field(8, ge=1)
     min_design_points: int = Field(16, ge=4)
     replicates: int = Field(2, ge=2)
+    replicated_fraction: float = Field(1.0, gt=0, le=1)
     confirm_replicates: int = Field(3, ge=1)
     refine_points: int = Field(8, ge=0)
     max_refine_waves: int = Field(5, ge=0)

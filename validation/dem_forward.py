@@ -30,7 +30,7 @@ from calibration.model_description import ModelDescription
 from warpdem import ConfigError
 
 from .dem_effects import DEMEffect, apply_effects
-from .forward import ForwardModel, ProposedMeasurement
+from .forward import ForwardModel, ProposedMeasurement, replicate_counts
 
 __all__ = ["ObservableSpec", "DEMForwardModel"]
 
@@ -278,9 +278,12 @@ class DEMForwardModel(ForwardModel):
             dev = wp.get_preferred_device()
         return str(dev).startswith("cuda")
 
-    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
-                 keys: Sequence[str]) -> np.ndarray:
-        out = np.full((len(parameter_sets), replicates, len(keys)), np.nan)
+    per_set_replicates = True  # evaluate takes one fill count per set (validation.forward)
+
+    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]],
+                 replicates: int | Sequence[int], keys: Sequence[str]) -> np.ndarray:
+        counts = replicate_counts(replicates, len(parameter_sets))
+        out = np.full((len(parameter_sets), int(counts.max()), len(keys)), np.nan)
         parameter_sets = [self.padded(effects, ps) for ps in parameter_sets]
         for (exp_name, settings_json), k_idx in self._groups(keys).items():
             settings = json.loads(settings_json)
@@ -291,7 +294,7 @@ class DEMForwardModel(ForwardModel):
                                    self.fixed])
             todo: list[tuple[int, int, Any, str]] = []
             for i, ps in enumerate(parameter_sets):
-                for r in range(replicates):
+                for r in range(counts[i]):
                     for rpm in rpms:
                         wid = self._world_id(model_fp, exp_fp, ps, r, rpm)
                         if wid not in self._cache and not self._adopt_near_record(wid, model_fp, exp_fp, exp_name,
@@ -300,7 +303,7 @@ class DEMForwardModel(ForwardModel):
             if todo:
                 self._run_worlds(exp_name, settings, desc, parameter_sets, todo)
             for i, ps in enumerate(parameter_sets):
-                for r in range(replicates):
+                for r in range(counts[i]):
                     for k in k_idx:
                         o = self.observables[keys[k]]
                         rec = self._cache[self._world_id(model_fp, exp_fp, ps, r, o.settings.get("rpm"))]

@@ -1,7 +1,8 @@
 """Stage 1: a space-filling design, its batched evaluation, and the DEM noise from replicates.
 
 The design is a Latin hypercube over the parameter box (:func:`calibration.designs.latin_hypercube`,
-scipy.stats.qmc).  Every set runs ``replicates`` independent fills in one forward-model call.
+scipy.stats.qmc).  Every set runs ``replicates`` independent fills in one forward-model call (or a
+share of the sets does and the rest one fill: :func:`design_replicates`).
 The fill-to-fill noise of each observable is the pooled standard deviation over all sets,
 
     s_p^2 = sum_k sum_r (y_kr - mean_k)^2 / sum_k (n_k - 1),
@@ -14,6 +15,7 @@ noiseless one, and counting it would shrink the estimate.
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from typing import Sequence
@@ -25,7 +27,7 @@ from calibration.designs import latin_hypercube
 from .effects import ModelVersion
 from .forward import ForwardRunner
 
-__all__ = ["DesignData", "run_design", "pooled_noise_sd"]
+__all__ = ["DesignData", "run_design", "evaluate_sets", "design_replicates", "pooled_noise_sd"]
 
 
 @dataclass(frozen=True)
@@ -62,16 +64,36 @@ class DesignData:
         return DesignData(np.vstack([self.X, other.X]), np.concatenate([pad(self.Y), pad(other.Y)]), self.keys)
 
 
+# a design that measures the DEM noise replicates at least this many of its sets (all when it has fewer)
+MIN_REPLICATED_SETS = 3
+
+
+def design_replicates(n_sets: int, replicates: int, replicated_fraction: float = 1.0,
+                      minimum: int = MIN_REPLICATED_SETS) -> tuple[int, ...]:
+    """Fills per set of a design of ``n_sets``: ``replicates`` for ceil(fraction * n_sets) sets (at
+    least ``minimum``, at most all), spread evenly through the design's order (a Latin hypercube's
+    order is random), one fill for the others. Deterministic, so a design planned up front and the
+    same design drawn by its study ask for the same worlds."""
+    n = int(n_sets)
+    k = min(n, max(int(minimum), math.ceil(float(replicated_fraction) * n - 1e-9)))
+    if k >= n or replicates <= 1:
+        return (int(replicates),) * n
+    chosen = set(np.round(np.linspace(0, n - 1, k)).astype(int).tolist())
+    return tuple(int(replicates) if i in chosen else 1 for i in range(n))
+
+
 def run_design(version: ModelVersion, runner: ForwardRunner, keys: Sequence[str], n_sets: int,
-               replicates: int, seed: int) -> DesignData:
-    """Latin hypercube of ``n_sets`` over ``version.space``, evaluated in one batched call."""
+               replicates: int, seed: int, replicated_fraction: float = 1.0) -> DesignData:
+    """Latin hypercube of ``n_sets`` over ``version.space``, evaluated in one batched call
+    (``replicates`` fills for the share ``replicated_fraction`` of the sets, one for the rest)."""
     X = latin_hypercube(version.space, int(n_sets), seed=seed)
-    return evaluate_sets(version, runner, keys, X, replicates)
+    return evaluate_sets(version, runner, keys, X, design_replicates(len(X), replicates, replicated_fraction))
 
 
 def evaluate_sets(version: ModelVersion, runner: ForwardRunner, keys: Sequence[str], X: np.ndarray,
-                  replicates: int) -> DesignData:
-    """Evaluate given parameter sets ``X`` (physical units) in one batched call."""
+                  replicates: int | Sequence[int]) -> DesignData:
+    """Evaluate given parameter sets ``X`` (physical units) in one batched call (``replicates``:
+    fills for every set, or one count per set)."""
     X = np.atleast_2d(np.asarray(X, float))
     Y = runner(version.effect_names, version.parameter_sets(X), replicates, tuple(keys))
     return DesignData(X, Y, tuple(keys))

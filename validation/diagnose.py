@@ -55,7 +55,7 @@ from threadpoolctl import threadpool_limits
 
 from calibration.designs import ParameterSpace, latin_hypercube
 
-from .design import DesignData, evaluate_sets
+from .design import DesignData, design_replicates, evaluate_sets
 from .discrimination import Discrimination, discriminate
 from .effects import CandidateEffect, ModelVersion
 from .forward import ForwardModel, ForwardRunner, merges_versions, runs_on_cuda, worlds_per_run
@@ -274,13 +274,14 @@ def run_planned_designs(runner: ForwardRunner, keys: Sequence[str], base_space: 
     chosen = [w for w in named if not versions or w in versions]
     keys = tuple(keys)
     X = {w: latin_hypercube(named[w][0].space, named[w][1], seed=named[w][2]) for w in chosen}
+    counts = {w: design_replicates(len(X[w]), settings.replicates, settings.replicated_fraction) for w in chosen}
     model = runner.model
     designs: dict[str, DesignData] = {}
     calls: list[dict[str, Any]] = []
 
     def record(names: list[str], n_sets: int, t0: float) -> None:
         calls.append({"versions": names, "sets": n_sets, "replicates": settings.replicates,
-                      "seconds": time.perf_counter() - t0})
+                      "runs": sum(sum(counts[w]) for w in names), "seconds": time.perf_counter() - t0})
         if after_call is not None:
             after_call(calls[-1])
 
@@ -293,14 +294,14 @@ def run_planned_designs(runner: ForwardRunner, keys: Sequence[str], base_space: 
             sets += [model.padded(v.effect_names, p) for p in v.parameter_sets(X[w])]
             spans[w] = (start, len(sets))
         t0 = time.perf_counter()
-        Y = runner(tuple(model.effects), sets, settings.replicates, keys)
+        Y = runner(tuple(model.effects), sets, [c for w in chosen for c in counts[w]], keys)
         for w, (a, b) in spans.items():
             designs[w] = DesignData(X[w], Y[a:b], keys)
         record(chosen, len(sets), t0)
         return PlannedRun(designs, calls, True)
     for w in chosen:
         t0 = time.perf_counter()
-        designs[w] = evaluate_sets(named[w][0], runner, keys, X[w], settings.replicates)
+        designs[w] = evaluate_sets(named[w][0], runner, keys, X[w], counts[w])
         record([w], len(X[w]), t0)
     return PlannedRun(designs, calls, False)
 
@@ -501,7 +502,8 @@ def _designs_up_front(obs: Observations, base_space: ParameterSpace, cands: tupl
     record.update({
         "calls": len(run.calls), "replicates": settings.replicates, "worlds_per_run": per_run,
         "sets": {w: len(d.X) for w, d in run.designs.items()},
-        "worlds": {w: len(d.X) * settings.replicates * per_run for w, d in run.designs.items()},
+        "worlds": {w: sum(design_replicates(len(d.X), settings.replicates, settings.replicated_fraction)) * per_run
+                   for w, d in run.designs.items()},
         "seconds": time.perf_counter() - t0})
     return record, run.designs
 

@@ -16,6 +16,10 @@ Optional, duck-typed capabilities (a model without them is served as before):
   ``designs_up_front: auto``).
 * ``worlds_per_run(keys)``: simulations one (parameter set, fill) of ``keys`` takes (the DEM: one
   world per experiment condition and drum speed); 1 when absent.
+* ``per_set_replicates = True``: ``evaluate`` also takes ``replicates`` as one fill count per set
+  (a design whose noise is measured on some of its sets only, ``replicated_fraction``) and
+  answers ``(n_sets, max count, n_keys)`` with NaN past each set's count. A model without it is
+  called once per distinct count (:func:`evaluate_counts`).
 
 :class:`ForwardRunner` wraps a model: it checks each answer's shape, counts runs and time.
 """
@@ -33,7 +37,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 __all__ = ["ForwardModel", "ProposedMeasurement", "ForwardRunner", "merges_versions", "runs_on_cuda",
-           "worlds_per_run"]
+           "worlds_per_run", "replicate_counts", "evaluate_counts"]
 
 
 @dataclass(frozen=True)
@@ -86,11 +90,13 @@ class ForwardModel(ABC):
 
         effects : names of the effects switched on (empty: base model).
         parameter_sets : one ``{parameter name: value}`` per set (base + effect parameters).
-        replicates : independent fills per set (>= 1).
+        replicates : independent fills per set (>= 1); a model with ``per_set_replicates`` also
+            takes one count per set.
         keys : observable keys (measured ones, or keys of :meth:`proposals`).
 
         Returns an array of shape ``(len(parameter_sets), replicates, len(keys))`` in each
-        observable's unit; NaN where a run failed.
+        observable's unit (the largest count for per-set counts, NaN past a set's own); NaN where a
+        run failed.
         """
 
     def proposals(self) -> Sequence[ProposedMeasurement]:
@@ -112,31 +118,70 @@ class ForwardRunner:
         self.seconds = 0.0
 
     def __call__(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]],
-                 replicates: int, keys: Sequence[str]) -> np.ndarray:
+                 replicates: int | Sequence[int], keys: Sequence[str]) -> np.ndarray:
+        """Simulate; ``replicates`` is one fill count for every set or one per set. Returns
+        ``(n_sets, largest count, n_keys)``, NaN past each set's count and where a run failed."""
         if len(parameter_sets) == 0:
             raise ValueError("no parameter sets to evaluate")
-        if isinstance(replicates, bool) or not isinstance(replicates, (int, np.integer)) or replicates < 1:
-            raise ValueError(f"replicates must be an integer >= 1, got {replicates!r}")
+        counts = replicate_counts(replicates, len(parameter_sets))
         t0 = time.perf_counter()
-        out = np.asarray(self.model.evaluate(tuple(effects), [dict(p) for p in parameter_sets], int(replicates),
-                                             tuple(keys)), dtype=float)
+        out = evaluate_counts(self.model, tuple(effects), [dict(p) for p in parameter_sets], counts, tuple(keys))
         with self._lock:
             self.seconds += time.perf_counter() - t0
-        want = (len(parameter_sets), int(replicates), len(keys))
-        if out.shape != want:
-            raise ValueError(f"forward model {type(self.model).__name__}.evaluate returned shape {out.shape}, expected "
-                             f"(n_sets, replicates, n_keys) = {want} for keys {list(keys)}")
-        if np.any(np.isinf(out)):
-            raise ValueError(f"forward model {type(self.model).__name__}.evaluate returned infinite values; "
-                             "use NaN for a failed run")
+        ran = np.arange(out.shape[1])[None, :] < counts[:, None]  # (n, r): the runs asked for
         with self._lock:
             self.calls += 1
-            self.runs += want[0] * want[1]
-            self.failed_runs += int(np.sum(np.all(np.isnan(out), axis=2)))
+            self.runs += int(counts.sum())
+            self.failed_runs += int(np.sum(np.all(np.isnan(out), axis=2) & ran))
         return out
 
     def to_dict(self) -> dict[str, Any]:
         return {"calls": self.calls, "runs": self.runs, "failed_runs": self.failed_runs, "seconds": self.seconds}
+
+
+def replicate_counts(replicates: int | Sequence[int], n_sets: int) -> np.ndarray:
+    """Fills per set, shape (n_sets,), from one count for all or one per set; each an integer >= 1."""
+    def ok(r: Any) -> bool:
+        return not isinstance(r, bool) and isinstance(r, (int, np.integer)) and r >= 1
+
+    if isinstance(replicates, (int, np.integer)) and not isinstance(replicates, bool):
+        if not ok(replicates):
+            raise ValueError(f"replicates must be an integer >= 1, got {replicates!r}")
+        return np.full(n_sets, int(replicates), dtype=int)
+    if isinstance(replicates, (str, bytes)) or not isinstance(replicates, (Sequence, np.ndarray)):
+        raise ValueError(f"replicates must be an integer >= 1 or one per set, got {replicates!r}")
+    counts = list(replicates)
+    if len(counts) != n_sets or not all(ok(r) for r in counts):
+        raise ValueError(f"replicates per set must be {n_sets} integers >= 1, got {counts!r}")
+    return np.asarray(counts, dtype=int)
+
+
+def evaluate_counts(model: ForwardModel, effects: tuple[str, ...], parameter_sets: list[dict[str, float]],
+                    counts: np.ndarray, keys: tuple[str, ...]) -> np.ndarray:
+    """``model.evaluate`` with ``counts[i]`` fills for set i, checked: one call when every count is
+    the same or the model takes per-set counts (``per_set_replicates``), else one call per count.
+    Returns ``(n_sets, max(counts), n_keys)`` with NaN past each set's count."""
+    name = type(model).__name__
+    r_max = int(counts.max())
+    if np.all(counts == r_max):
+        groups = [(np.arange(len(counts)), r_max)]
+    elif getattr(model, "per_set_replicates", False):
+        groups = [(np.arange(len(counts)), tuple(int(c) for c in counts))]
+    else:
+        groups = [(np.flatnonzero(counts == c), int(c)) for c in np.unique(counts)]
+    out = np.full((len(counts), r_max, len(keys)), np.nan)
+    for idx, reps in groups:
+        got = np.asarray(model.evaluate(effects, [parameter_sets[i] for i in idx], reps, keys), dtype=float)
+        width = reps if isinstance(reps, int) else r_max
+        want = (len(idx), width, len(keys))
+        if got.shape != want:
+            raise ValueError(f"forward model {name}.evaluate returned shape {got.shape}, expected "
+                             f"(n_sets, replicates, n_keys) = {want} for keys {list(keys)}")
+        if np.any(np.isinf(got)):
+            raise ValueError(f"forward model {name}.evaluate returned infinite values; use NaN for a failed run")
+        out[idx, :width] = got
+    out[np.arange(r_max)[None, :] >= counts[:, None]] = np.nan  # nothing past a set's own count
+    return out
 
 
 def merges_versions(model: Any) -> bool:

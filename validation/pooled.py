@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .forward import ForwardModel, ProposedMeasurement
+from .forward import ForwardModel, ProposedMeasurement, evaluate_counts, replicate_counts
 
 __all__ = ["PooledForward", "run_as_workers"]
 
@@ -40,7 +40,7 @@ __all__ = ["PooledForward", "run_as_workers"]
 class _Request:
     effects: tuple[str, ...]
     parameter_sets: list[dict[str, float]]
-    replicates: int
+    replicates: tuple[int, ...]  # fills per set
     keys: tuple[str, ...]
     done: bool = False
     error: BaseException | None = None
@@ -51,8 +51,8 @@ class PooledForward(ForwardModel):
     """A :class:`ForwardModel` that merges the concurrent requests of its workers.
 
     inner : the model that runs the simulations. With ``inner.superset`` (every version shares one
-        contact law and material) all requests of one merge go into one call per replicate count;
-        otherwise one call per model version.
+        contact law and material) all requests of one merge go into one call (one per fill count
+        when the inner model does not take per-set counts); otherwise one call per model version.
 
     Threads that call :meth:`evaluate` must be registered workers (:meth:`worker` or
     :func:`run_as_workers`); an unregistered caller is served at once, alone.
@@ -110,9 +110,12 @@ class PooledForward(ForwardModel):
             self._serve_if_all_waiting()
 
     # ------------------------------------------------------------------ ForwardModel
-    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]], replicates: int,
-                 keys: Sequence[str]) -> np.ndarray:
-        req = _Request(tuple(effects), [dict(p) for p in parameter_sets], int(replicates), tuple(keys))
+    per_set_replicates = True  # requests may hold one fill count per set (validation.forward)
+
+    def evaluate(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]],
+                 replicates: int | Sequence[int], keys: Sequence[str]) -> np.ndarray:
+        counts = replicate_counts(replicates, len(parameter_sets))
+        req = _Request(tuple(effects), [dict(p) for p in parameter_sets], tuple(int(c) for c in counts), tuple(keys))
         with self._cv:
             self._pending.append(req)
             if not self._is_worker:
@@ -147,23 +150,26 @@ class PooledForward(ForwardModel):
         inner = self.inner
         try:
             if getattr(inner, "superset", False):
+                # every distinct (padded) set once, with the most fills any request asks of it: one call
+                # when the inner model takes per-set counts, else one per count (evaluate_counts)
                 all_effects = tuple(inner.effects)
-                for reps in sorted({r.replicates for r in batch}):
-                    group = [r for r in batch if r.replicates == reps]
-                    sets, seen = [], set()
-                    for r in group:
-                        for p in r.parameter_sets:
-                            padded = inner.padded(r.effects, p)
-                            key = tuple(sorted(padded.items()))
-                            if key not in seen:
-                                seen.add(key)
-                                sets.append(padded)
-                    keys = tuple(dict.fromkeys(k for r in group for k in r.keys))
-                    inner.evaluate(all_effects, sets, reps, keys)
-                    self.merges.append({"requests": len(group), "sets": len(sets), "replicates": reps,
-                                        "keys": len(keys)})
+                most: dict[tuple, int] = {}
+                padded_sets: dict[tuple, dict[str, float]] = {}
+                for r in batch:
+                    for p, c in zip(r.parameter_sets, r.replicates):
+                        padded = inner.padded(r.effects, p)
+                        key = tuple(sorted(padded.items()))
+                        padded_sets.setdefault(key, padded)
+                        most[key] = max(most.get(key, 0), c)
+                keys = tuple(dict.fromkeys(k for r in batch for k in r.keys))
+                counts = np.array([most[k] for k in padded_sets], dtype=int)
+                evaluate_counts(inner, all_effects, list(padded_sets.values()), counts, keys)
+                distinct = sorted(set(counts.tolist()))
+                self.merges.append({"requests": len(batch), "sets": len(padded_sets),
+                                    "replicates": distinct[0] if len(distinct) == 1 else distinct,
+                                    "keys": len(keys)})
             for r in batch:  # superset: every world is cached now; otherwise each version runs here
-                r.result = inner.evaluate(r.effects, r.parameter_sets, r.replicates, r.keys)
+                r.result = evaluate_counts(inner, r.effects, r.parameter_sets, np.array(r.replicates), r.keys)
         except BaseException as exc:  # every waiting worker learns of the failure
             for r in batch:
                 if r.result is None:

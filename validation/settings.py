@@ -46,6 +46,13 @@ class DiagnosisSettings:
     max_conflict_size : largest observable subset searched for conflicts.
     gp_restarts, cv_folds : surrogate hyperparameter restarts and cross-validation folds.
     seed : seed of every design, scan and sample.
+    replicated_fraction : the share of each design's sets (Latin hypercube and refinement waves) that
+        run ``replicates`` fills; the others run one (1.0, the default: every set). The DEM's
+        fill-to-fill noise is pooled over the replicated sets (at least 3 per design, or all), the
+        surrogates train on every set's mean with its own noise. 1/3 cuts a design's worlds by a
+        third at 2 replicates, at the price of a noise estimate on a third of the degrees of freedom
+        (its relative error grows from about 1/sqrt(2 n) to 1/sqrt(2 n / 3)). Confirmation runs keep
+        ``confirm_replicates``.
     designs_up_front : ``"auto"``, True or False. On: before the base study, every design
         :func:`validation.diagnose.planned_designs` lists (the base model and each candidate of the
         first ranking round) is requested in ONE call of the forward model (one launch per
@@ -81,6 +88,7 @@ class DiagnosisSettings:
     cv_folds: int = 5
     seed: int = 0
     designs_up_front: bool | str = "auto"
+    replicated_fraction: float = 1.0
 
     def __post_init__(self) -> None:
         _int("design_points_per_parameter", self.design_points_per_parameter, 1)
@@ -100,6 +108,9 @@ class DiagnosisSettings:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"DiagnosisSettings.{name} must be a positive number, got {v!r}")
+        v = self.replicated_fraction
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
+            raise ValueError(f"DiagnosisSettings.replicated_fraction must be in (0, 1], got {v!r}")
         v = self.designs_up_front
         if not (isinstance(v, bool) or (isinstance(v, str) and v == "auto")):
             raise ValueError(f"DiagnosisSettings.designs_up_front must be 'auto', True or False, got {v!r}")
