@@ -122,7 +122,7 @@ def test_a_third_replicated_reaches_the_same_verdict_with_fewer_runs(third_repli
     runs = {f: r.forward["runs"] for f, r in third_replicated.items()}
     assert runs[1 / 3] < 0.8 * runs[1.0], runs
     # the noise is measured on fewer degrees of freedom (the base model's pile angle, "no pile" in most
-    # of the box, may have none left: it then counts as a clipped, one-sided observable, as with full
-    # replication where every replicated set is clipped)
+    # of the box, may have none: it then counts as a clipped, one-sided observable, as it does here with
+    # every set replicated too)
     assert np.all(third.base.noise_dof <= full.base.noise_dof) and third.base.noise_dof.sum() < full.base.noise_dof.sum()
     assert np.count_nonzero(third.base.noise_dof) >= len(third.base.noise_dof) - 1
