@@ -35,9 +35,10 @@ DEFAULT_FUSED_PLACEMENT = "auto"
 
 def resolve_performance_options(on_gpu: bool, neighbour_layout: str = "auto", history_layout: str = "auto",
                                 fused_placement: bool | str = "auto") -> tuple[str, str, bool]:
-    """The layouts and placement a solver uses for ``"auto"`` (``on_gpu``: its device is CUDA): on a GPU the slot-major
-    layouts and the fused placement (one settled bed of 1e6 spheres, H200, 2026-11-27: 6.5e8 ->
-    8.9e8 sphere-steps/s; 200k spheres in drum worlds +11 %; small models unchanged), on the CPU
+    """The layouts and placement a solver uses for ``"auto"`` (``on_gpu``: its device is CUDA): on a
+    GPU the slot-major layouts and the fused placement (one settled bed of 1e6 spheres, H200,
+    2026-11-27: 6.5e8 -> 8.9e8 sphere-steps/s; 200k spheres in drum worlds +11 %; small models
+    unchanged; ``benchmarks/levers_gpu.sh``), on the CPU
     the sphere-major layouts and a placement launch (slot-major contact slots cost 6-11 % there).
     Every choice gives the same results, bit for bit (``tests/test_layout_levers.py``).
     Explicit values pass through, checked."""
@@ -56,6 +57,8 @@ def resolve_performance_options(on_gpu: bool, neighbour_layout: str = "auto", hi
                               f"got {fused_placement!r}")
         fused_placement = choices[fused_placement]
     return out[0], out[1], bool(fused_placement)
+
+
 # names of the State arrays that hold per-sphere contact slots
 HISTORY_ARRAYS = ("contact_partner", "contact_spring", "contact_roll", "contact_wnormal")
 
