@@ -117,7 +117,7 @@ def run_with(run, options: dict, device: str, monkeypatch: pytest.MonkeyPatch, u
 @functools.lru_cache(maxsize=None)
 def default_cpu(name: str) -> dict[str, np.ndarray]:
     with pytest.MonkeyPatch.context() as mp:
-        return run_with(RUNS[name], {}, "cpu", mp)
+        return run_with(RUNS[name], OFF, "cpu", mp)
 
 
 def assert_bitwise(got: dict, want: dict, label: str) -> None:
@@ -174,9 +174,9 @@ def test_checkpoints_load_across_layouts(tmp_path, save_with, load_with):
 
     def scene(options):
         sim = SCENES["clumps"]()
-        return wd.Simulation(sim.model, sim.dt, use_graph=False, **(options or {}))
+        return wd.Simulation(sim.model, sim.dt, use_graph=False, **(options or OFF))
 
-    ref = scene(None)
+    ref = scene(OFF)
     ref.run(150)
     sim = scene(LEVERS.get(save_with))
     sim.run(80)
@@ -184,8 +184,8 @@ def test_checkpoints_load_across_layouts(tmp_path, save_with, load_with):
     with np.load(path) as data:  # the file holds the default layout
         np.testing.assert_array_equal(data["state/contact_partner"],
                                       sim.solver.export_state(sim.state)["contact_partner"])
-    back = load_checkpoint(path, device="cpu", model=sim.model, use_graph=False, **LEVERS.get(load_with, {}))
-    assert back.solver.history_layout == LEVERS.get(load_with, {}).get("history_layout", "sphere_major")
+    back = load_checkpoint(path, device="cpu", model=sim.model, use_graph=False, **LEVERS.get(load_with, OFF))
+    assert back.solver.history_layout == LEVERS.get(load_with, OFF)["history_layout"]
     back.run(70)
     assert_bitwise(state_arrays(back), state_arrays(ref), f"checkpoint {save_with} -> {load_with}")
 
@@ -240,7 +240,7 @@ def impacts_run(options: dict) -> dict[str, np.ndarray]:
 
 @pytest.mark.parametrize("lever", ["history_slot_major", "all"])
 def test_impact_recorder_reads_the_slots_in_either_layout(lever):
-    assert_bitwise(impacts_run(LEVERS[lever]), impacts_run({}), f"impacts/{lever}")
+    assert_bitwise(impacts_run(LEVERS[lever]), impacts_run(OFF), f"impacts/{lever}")
 
 
 @pytest.fixture(scope="module")
@@ -251,9 +251,9 @@ def pump_geometry():
     return build_pump(PumpDesign(inlet_length=0.06), resolution=0.5)
 
 
-def inlet_run(geo, options: dict) -> dict[str, np.ndarray]:
-    """Bodies activated by the pump inlet's kernel (which requests a list rebuild) and removed by
-    it between run chunks (``invalidate_views``); one body moved past the outlet by hand."""
+def inlet_sim(geo, options: dict):
+    """Two pump worlds of 10-12 mm spheres that the inlet activates, with the solver ``options``;
+    returns the Simulation and the inlet attached to it."""
     from calibration.materials import BulkMaterial, sample_particles
     from pump.inlet import ParticleInlet, plan_injection
 
@@ -267,6 +267,13 @@ def inlet_run(geo, options: dict) -> dict[str, np.ndarray]:
     inlet.add_to_builder(b, "gravel")
     sim = wd.Simulation(b.finalize("cpu", check_overlaps=False), dt=2e-5, use_graph=False, **options)
     inlet.attach(sim)
+    return sim, inlet
+
+
+def inlet_run(geo, options: dict) -> dict[str, np.ndarray]:
+    """Bodies activated by the pump inlet's kernel (which requests a list rebuild) and removed by
+    it between run chunks (``invalidate_views``); one body moved past the outlet by hand."""
+    sim, inlet = inlet_sim(geo, options)
     inlet.update(sim)
     for chunk in range(8):
         sim.run(50)
@@ -284,7 +291,7 @@ def inlet_run(geo, options: dict) -> dict[str, np.ndarray]:
 def test_pump_inlet_with_all_levers(pump_geometry):
     """An integration run (the bodies the inlet activates touch nothing in their first step, so
     this run alone would not notice stale views; the next test checks the views themselves)."""
-    assert_bitwise(inlet_run(pump_geometry, LEVERS["all"]), inlet_run(pump_geometry, {}), "pump inlet/all")
+    assert_bitwise(inlet_run(pump_geometry, LEVERS["all"]), inlet_run(pump_geometry, OFF), "pump inlet/all")
 
 
 # ----------------------------------------------------------------------------- fused placement's trigger
@@ -305,20 +312,8 @@ def test_fused_placement_places_again_after_every_change(pump_geometry):
     with a list rebuild requested, bodies removed outside a box, a paused world, a body put back
     by the instability check, a step from another State; and on a plain step the placement
     launch does nothing."""
-    from calibration.materials import BulkMaterial, sample_particles
-    from pump.inlet import ParticleInlet, plan_injection
-
     geo = pump_geometry
-    material = BulkMaterial.spheres(0.010, 0.012)
-    plan = plan_injection(geo, 600.0, 0.01, material.max_bounding_radius, worlds=2, seed=2)
-    samples = [sample_particles(material, n=int((plan.world == w).sum()), rng=w) for w in range(2)]
-    inlet = ParticleInlet(geo, plan, samples)
-    b = wd.ModelBuilder(num_worlds=2, gravity=(0, -9.81, 0))
-    b.add_material(wd.GRAVEL)
-    b.add_wall((geo.casing.vertices, geo.casing.faces), "gravel", name="casing")
-    inlet.add_to_builder(b, "gravel")
-    sim = wd.Simulation(b.finalize("cpu", check_overlaps=False), dt=2e-5, use_graph=False, fused_placement=True)
-    inlet.attach(sim)
+    sim, inlet = inlet_sim(geo, {**OFF, "fused_placement": True})
     so = sim.solver
 
     def check(what: str) -> None:
