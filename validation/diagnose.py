@@ -245,13 +245,15 @@ class PlannedRun:
     """What :func:`run_planned_designs` ran.
 
     designs : per version name (:func:`version_name`), its design (the Latin hypercube and the answers).
-    calls : one entry per forward-model call: the versions it held, sets, replicates, seconds.
+    calls : one entry per forward-model call: the versions it held, sets, replicates, runs, seconds.
     merged : True when every version went into one call (a model of the superset protocol).
+    counts : per version name, the fills of each of its sets (:func:`validation.design.design_replicates`).
     """
 
     designs: dict[str, DesignData]
     calls: list[dict[str, Any]]
     merged: bool
+    counts: dict[str, tuple[int, ...]]
 
 
 def run_planned_designs(runner: ForwardRunner, keys: Sequence[str], base_space: ParameterSpace,
@@ -298,12 +300,12 @@ def run_planned_designs(runner: ForwardRunner, keys: Sequence[str], base_space: 
         for w, (a, b) in spans.items():
             designs[w] = DesignData(X[w], Y[a:b], keys)
         record(chosen, len(sets), t0)
-        return PlannedRun(designs, calls, True)
+        return PlannedRun(designs, calls, True, counts)
     for w in chosen:
         t0 = time.perf_counter()
         designs[w] = evaluate_sets(named[w][0], runner, keys, X[w], counts[w])
         record([w], len(X[w]), t0)
-    return PlannedRun(designs, calls, False)
+    return PlannedRun(designs, calls, False, counts)
 
 
 def _up_front_choice(settings: DiagnosisSettings, model: ForwardModel) -> tuple[bool, str]:
@@ -502,8 +504,7 @@ def _designs_up_front(obs: Observations, base_space: ParameterSpace, cands: tupl
     record.update({
         "calls": len(run.calls), "replicates": settings.replicates, "worlds_per_run": per_run,
         "sets": {w: len(d.X) for w, d in run.designs.items()},
-        "worlds": {w: sum(design_replicates(len(d.X), settings.replicates, settings.replicated_fraction)) * per_run
-                   for w, d in run.designs.items()},
+        "worlds": {w: sum(run.counts[w]) * per_run for w in run.designs},
         "seconds": time.perf_counter() - t0})
     return record, run.designs
 
