@@ -23,7 +23,8 @@
 #
 # Env: CASE (rolling | base | cohesion | shape; default rolling), DEVICE (default cuda),
 #      REPLICATED_FRACTION (diagnosis.replicated_fraction of the timed config, e.g. 0.34; default: the
-#      source config's, 1.0: every design set replicated),
+#      source config's, 1.0: every design set replicated), DESIGN_POINTS (diagnosis.
+#      design_points_per_parameter of the timed config, e.g. 4; default: the source config's, 6),
 #      PYTHON (default python3), CHUNK_S (default 540), MIN_STEP_S (a step is not started with less
 #      left, default 60), SRC (default docs/results/hidden_effects_paper), EXPORT (a folder to copy
 #      the results to at the end of each call: chunks.jsonl, summary.json, logs.txt, the cache,
@@ -56,26 +57,29 @@ if [ ! -f "$cfg" ] && [ "$phase" != total ]; then
     exit 2
   fi
   cp "$src/lab_$case_.yaml" "$out/" || exit 2
-  $py - "$src/diagnose_$case_.yaml" "$cfg" "$out" "$case_" "${REPLICATED_FRACTION:-}" <<'EOF' || exit 2
+  $py - "$src/diagnose_$case_.yaml" "$cfg" "$out" "$case_" "${REPLICATED_FRACTION:-}" "${DESIGN_POINTS:-}" <<'EOF' || exit 2
 import sys
 from pathlib import Path
 
 import yaml
 
-src, dst, out, case, fraction = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3]), sys.argv[4], sys.argv[5]
+src, dst, out, case, fraction, points = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3]), sys.argv[4], sys.argv[5], sys.argv[6]
 doc = yaml.safe_load(Path(src).read_text())
 doc["cache"] = str(out / "dem_cache.jsonl")  # a fresh cache, never the one beside the source config
 doc["output"] = str(out / f"diagnosis_{case}")
 doc.setdefault("diagnosis", {})["designs_up_front"] = True
 if fraction:  # REPLICATED_FRACTION: the share of design sets with replicates (validation.design.design_replicates)
     doc["diagnosis"]["replicated_fraction"] = float(fraction)
+if points:  # DESIGN_POINTS: Latin-hypercube sets per parameter of every model version's design
+    doc["diagnosis"]["design_points_per_parameter"] = int(points)
 assert Path(doc["cache"]).resolve() != (Path(src).parent / "dem_cache.jsonl").resolve()
 dst.write_text(yaml.safe_dump(doc, sort_keys=False))
 from validation.config import load_diagnosis_config  # noqa: E402  (checks the config, runs nothing)
 
 load_diagnosis_config(dst)
 print(f"lone_set_timing: set up {dst} (cache {doc['cache']}, designs_up_front: true, "
-      f"replicated_fraction: {doc['diagnosis'].get('replicated_fraction', 1.0)})")
+      f"replicated_fraction: {doc['diagnosis'].get('replicated_fraction', 1.0)}, "
+      f"design_points_per_parameter: {doc['diagnosis'].get('design_points_per_parameter')})")
 EOF
 fi
 
