@@ -8,6 +8,7 @@ evidence gap to the runner-up), what it added, the error history (chi^2/dof and 
 
     python benchmarks/score_hidden_effects.py docs/results/hidden_effects_paper
     python benchmarks/score_hidden_effects.py OUT --json OUT/score.json --markdown OUT/score.md
+    python benchmarks/score_hidden_effects.py OUT --cases base rolling shape   (a subset was diagnosed)
 
 A case passes when the top-ranked candidate is the hidden effect (for the base case: the verdict
 "no effect is needed"); the recalibration's agreement is reported separately, since a right
@@ -107,12 +108,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("folder", type=Path, help="the proof's output folder (truth_*.json, diagnosis_*/)")
     ap.add_argument("--json", type=Path, default=None, help="write the rows as JSON here")
     ap.add_argument("--markdown", type=Path, default=None, help="write the table as Markdown here")
+    ap.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES),
+                    help="score only these cases (default: all four); the verdict line names how many")
     args = ap.parse_args(argv)
-    missing = [c for c in CASES if not (args.folder / f"truth_{c}.json").exists()]
+    missing = [c for c in args.cases if not (args.folder / f"truth_{c}.json").exists()]
     if missing:
         print(f"score_hidden_effects: no truth file for {', '.join(missing)} in {args.folder}", file=sys.stderr)
         return 2
-    rows = [score_case(args.folder, c) for c in CASES]
+    rows = [score_case(args.folder, c) for c in args.cases]
     found = sum(bool(r.get("found")) for r in rows)
     text = f"Hidden effect found in {found} of {len(rows)} cases.\n\n" + markdown(rows)
     print(text)
