@@ -126,3 +126,23 @@ def test_a_third_replicated_reaches_the_same_verdict_with_fewer_runs(third_repli
     # every set replicated too)
     assert np.all(third.base.noise_dof <= full.base.noise_dof) and third.base.noise_dof.sum() < full.base.noise_dof.sum()
     assert np.count_nonzero(third.base.noise_dof) >= len(third.base.noise_dof) - 1
+
+
+@pytest.mark.parametrize("case", ["base", "rolling_resistance", "cohesion", "shape"])
+def test_the_twenty_minute_settings_keep_every_verdict(case):
+    """The settings of the H100 lone-set timing (``design_points_per_parameter`` 4, a third of the
+    sets replicated): on the analytic model every hidden-effect case is still found and fitted,
+    and the base truth still needs nothing, with at most two thirds of the runs."""
+    truth, effects = ({"mu_s_pp": 0.5, "mu_s_pw": 0.4}, ()) if case == "base" else (TRUTHS[case], (case,))
+    obs = lab_observables(truth, effects)
+    fast = DiagnosisSettings(**{**FAST.to_dict(), "design_points_per_parameter": 4, "replicated_fraction": 0.34})
+    full = DiagnosisSettings(**{**FAST.to_dict(), "design_points_per_parameter": 6})
+    r = diagnose(obs, BASE, [ROLLING, COHESION, SHAPE], AnalyticGranularModel(1), fast)
+    if case == "base":
+        assert r.base_adequate and r.added_effects == () and r.met
+        return
+    assert not r.base_adequate and r.rounds[0].top.name == case and r.added_effects == (case,)
+    final = r.history.versions[-1]
+    assert final.n_within == final.n_observables and r.met
+    reference = diagnose(obs, BASE, [ROLLING, COHESION, SHAPE], AnalyticGranularModel(1), full)
+    assert r.forward["runs"] <= 2 / 3 * reference.forward["runs"], (r.forward["runs"], reference.forward["runs"])
