@@ -1,6 +1,5 @@
 """The solver's ``wall_stage="fused"`` (wall-contact collection and wall forces in one kernel)
-and ``"compact"`` (stage 2 over a list of the spheres that touch a wall) give the same results as
-``"split"`` (two kernels over every sphere), bit for bit: the five CPU scenes of
+gives the same results as ``"split"`` (two kernels), bit for bit: the five CPU scenes of
 tests/test_contact_stages.py (and its contact launch with ``walls_on=False``) are run with each
 option and their body states, contact counts, forces and wall wear compared with
 ``np.array_equal``. Both options call the same ``wp.func``s, so every float operation is the
@@ -24,7 +23,7 @@ import warp as wp
 import warpdem as wd
 
 sys.path.insert(0, str(Path(__file__).parent))
-from test_contact_stages import SCENES, STEPS, run_scene  # noqa: E402
+from test_contact_stages import SCENES, run_scene  # noqa: E402
 
 
 DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no CUDA device"))]
@@ -46,32 +45,16 @@ def run_scene_with(name: str, wall_stage: str, device: str, monkeypatch: pytest.
 
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("name", list(SCENES))
-@pytest.mark.parametrize("other", ["fused", "compact"])
-def test_wall_stage_variants_are_bitwise_identical_to_split(other, name, device, monkeypatch):
+def test_fused_wall_stage_is_bitwise_identical_to_split(name, device, monkeypatch):
     split = run_scene_with(name, "split", device, monkeypatch)
-    variant = run_scene_with(name, other, device, monkeypatch)
+    fused = run_scene_with(name, "fused", device, monkeypatch)
     assert int(split["contact_count"].sum()) > 0  # the scene has contacts
-    assert split.keys() == variant.keys()
+    assert split.keys() == fused.keys()
     for key, want in split.items():
         if device == "cuda" and key.startswith("wear_"):
-            np.testing.assert_allclose(variant[key], want, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{key}")
+            np.testing.assert_allclose(fused[key], want, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{key}")
         else:
-            assert np.array_equal(variant[key], want), f"{name}/{key}: {other} differs from split"
-
-
-def test_compact_wall_stage_lists_exactly_the_spheres_that_touch_a_wall():
-    import functools as ft
-
-    sim = ft.partial(wd.Simulation, wall_stage="compact")
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(wd, "Simulation", sim)
-        s = SCENES["drum"]()
-    s.run(STEPS)
-    solver = s.solver
-    touching = solver.wall_count.numpy() > 0
-    listed = solver.wall_touching.numpy()[: int(solver.wall_num_touching.numpy()[0])]
-    assert touching.any() and not touching.all()  # the scene has both kinds of spheres
-    assert sorted(listed.tolist()) == np.flatnonzero(touching).tolist()
+            assert np.array_equal(fused[key], want), f"{name}/{key}: fused differs from split"
 
 
 def test_wall_stage_option_is_passed_to_the_solver(monkeypatch):
@@ -84,7 +67,7 @@ def test_wall_stage_option_is_passed_to_the_solver(monkeypatch):
 
 def test_unknown_wall_stage_is_a_config_error():
     model = SCENES["wear"]().model
-    with pytest.raises(wd.ConfigError, match=r"wall_stage must be one of \('split', 'fused', 'compact'\)"):
+    with pytest.raises(wd.ConfigError, match=r"wall_stage must be one of \('split', 'fused'\)"):
         wd.DEMSolver(model, 1e-6, force=True, wall_stage="merged")
     with pytest.raises(wd.ConfigError, match="wall_stage"):
         wd.Simulation(model, 1e-6, force=True, use_graph=False, wall_stage="merged")

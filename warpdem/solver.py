@@ -21,7 +21,7 @@ DEFAULT_NEIGHBOUR_SEARCH = "cell_list"
 # how the wall contacts are computed (DEMSolver's wall_stage): collection and forces as two
 # kernels, or both in one kernel (one thread per sphere); the same body states, bit for bit
 # (wear sums on a GPU agree to float rounding: their atomic adds are unordered)
-WALL_STAGES = ("split", "fused", "compact")
+WALL_STAGES = ("split", "fused")
 DEFAULT_WALL_STAGE = "split"
 # where entry k of sphere i lies in the Verlet list (DEMSolver's neighbour_layout) and in the
 # contact slots (history_layout): i * capacity + k, or k * num_spheres + i (warpdem.layouts);
@@ -147,9 +147,6 @@ class DEMSolver:
             one thread). Both give the same body states, bit for bit (on a GPU the per-triangle
             wear sums agree to float rounding: atomic adds in no fixed order). Measured on an H100:
             "fused" is 2 % faster at 1e6 spheres and 4-5 % slower on small drum models.
-            ``"compact"``: split, with stage 1 listing the spheres that touch a wall and stage 2
-            running over that list only (the same per-sphere work; in a bed most warps hold one
-            touching sphere among idle ones). Same results as ``"split"``, bit for bit on the CPU.
         neighbour_layout: where entry k of sphere i lies in the Verlet list: ``"sphere_major"``
             (``i * max_neighbours + k``) or ``"slot_major"`` (``k * num_spheres + i``: the
             threads of a warp read consecutive addresses as they walk their lists); default
@@ -206,8 +203,6 @@ class DEMSolver:
         self.slot_point = wp.zeros(n * k, dtype=wp.vec3, device=d)
         self.slot_depth = wp.zeros(n * k, dtype=float, device=d)
         self.slot_tri = wp.zeros(n * k, dtype=int, device=d)
-        self.wall_touching = wp.zeros(n if wall_stage == "compact" else 1, dtype=int, device=d)
-        self.wall_num_touching = wp.zeros(1, dtype=int, device=d)
         self.overflow = wp.zeros(1, dtype=int, device=d)
         # per world: 0 stable, else the first cause of instability (kernels.UNSTABLE_*)
         self.world_fail = wp.zeros(max(model.num_worlds, 1), dtype=int, device=d)
@@ -492,8 +487,6 @@ class DEMSolver:
         found.point = self.slot_point
         found.depth = self.slot_depth
         found.triangle = self.slot_tri
-        found.touching = self.wall_touching
-        found.num_touching = self.wall_num_touching
         wear = stages.WearAccumulators()
         ws = self.wall_stats
         wear.energy_n, wear.energy_t = ws.energy_n, ws.energy_t
@@ -575,8 +568,7 @@ class DEMSolver:
         wall contacts, wall forces and wear, particle forces (:mod:`warpdem.stages`), from
         ``state_in``'s history into ``state_out``'s, forces into ``sphere_f``/``sphere_t``.
         ``walls_on=False`` leaves the walls out (profiling); a model without walls skips the
-        wall stages too. The wall stages are two kernels, one, or two over the touching spheres
-        (``wall_stage``)."""
+        wall stages too. The wall stages are two kernels or one (``wall_stage``)."""
         m = self.model
         d = m.device
         n = m.num_spheres
@@ -590,13 +582,6 @@ class DEMSolver:
             wp.launch(st.collect_wall_contacts_and_forces, dim=n, inputs=[
                 p.spheres, p.neighbours, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
                 device=d)
-        elif walls_on and self.wall_stage == "compact":
-            self.wall_num_touching.zero_()
-            wp.launch(st.collect_and_list_wall_contacts, dim=n,
-                      inputs=[p.spheres, p.neighbours, p.walls, step, contacts, p.found], device=d)
-            wp.launch(st.wall_forces_of_touching, dim=n,
-                      inputs=[p.spheres, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
-                      device=d)
         elif walls_on:
             wp.launch(st.collect_wall_contacts, dim=n,
                       inputs=[p.spheres, p.neighbours, p.walls, step, contacts, p.found], device=d)

@@ -36,7 +36,7 @@ from ..layouts import DEFAULT_SLOT_LAYOUT
 from .particle_contacts import particle_forces_kernel
 from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
                       WallSlots, WearAccumulators)
-from .wall_contacts import collect_and_list_wall_contacts_kernel, collect_wall_contacts_kernel, wall_stage_kernels
+from .wall_contacts import collect_wall_contacts_kernel, wall_stage_kernels
 
 __all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", "ContactParameters", "NeighbourList",
            "SphereForces", "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
@@ -45,15 +45,12 @@ __all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", 
 @dataclass(frozen=True)
 class ContactStages:
     """The contact kernels of one contact law: the three stages in launch order, and stages 1
-    and 2 fused into one kernel (launched instead of the first two with ``wall_stage="fused"``), and
-    stages 1 and 2 over a list of the spheres with wall contacts (``wall_stage="compact"``)."""
+    and 2 fused into one kernel (launched instead of the first two with ``wall_stage="fused"``)."""
 
     collect_wall_contacts: "wp.Kernel"
     wall_forces: "wp.Kernel"
     particle_forces: "wp.Kernel"
     collect_wall_contacts_and_forces: "wp.Kernel"
-    collect_and_list_wall_contacts: "wp.Kernel"  # ``wall_stage="compact"``: stage 1 listing the touching spheres
-    wall_forces_of_touching: "wp.Kernel"  # ``"compact"``: stage 2 over that list
 
 
 @dataclass
@@ -78,5 +75,4 @@ def contact_stages(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
     walls = wall_stage_kernels(law, history_layout)
     return ContactStages(collect_wall_contacts_kernel(history_layout), walls.wall_forces,
                          particle_forces_kernel(law, neighbour_layout, history_layout),
-                         walls.collect_wall_contacts_and_forces, collect_and_list_wall_contacts_kernel(history_layout),
-                         walls.wall_forces_of_touching)
+                         walls.collect_wall_contacts_and_forces)

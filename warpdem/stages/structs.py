@@ -72,8 +72,6 @@ class WallSlots:
     point: wp.array(dtype=wp.vec3)  # contact point on the wall, world frame [m]
     depth: wp.array(dtype=float)  # overlap r_i - distance [m]
     triangle: wp.array(dtype=int)  # triangle of the wall (for wear)
-    touching: wp.array(dtype=int)  # ``wall_stage="compact"``: the spheres with wall contacts this step
-    num_touching: wp.array(dtype=int)  # [0]: how many entries of ``touching`` are set (cleared each step)
 
 
 @wp.struct

@@ -180,25 +180,6 @@ def collect_wall_contacts_kernel(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "
     return collect_wall_contacts
 
 
-@functools.lru_cache(maxsize=None)
-def collect_and_list_wall_contacts_kernel(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
-    """Stage 1 that also lists the spheres with wall contacts in ``found.touching`` (in no fixed
-    order on a GPU; ``found.num_touching`` must be 0 before the launch), for
-    ``wall_stage="compact"``; built once per layout."""
-    collect_sphere_wall_contacts = wall_collection_function(history_layout)
-
-    @wp.kernel
-    def collect_and_list_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
-                                       step: StepInputs, contacts: ContactHistory, found: WallSlots):
-        i = wp.tid()
-        n_found = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
-        found.count[i] = n_found
-        if n_found > 0:
-            found.touching[wp.atomic_add(found.num_touching, 0, 1)] = i
-
-    return collect_and_list_wall_contacts
-
-
 @wp.func
 def accumulate_wear(wear: WearAccumulators, entry: int, fn: float, ft: wp.vec3, v_rel: wp.vec3, nrm: wp.vec3,
                     dt: float):
@@ -220,7 +201,6 @@ class WallStageKernels:
 
     wall_forces: "wp.Kernel"
     collect_wall_contacts_and_forces: "wp.Kernel"
-    wall_forces_of_touching: "wp.Kernel"
 
 
 @functools.lru_cache(maxsize=None)
@@ -333,19 +313,6 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
         wall_forces_of_sphere(i, n_found, spheres, walls, params, step, history, contacts, found, wear, forces)
 
     @wp.kernel
-    def wall_forces_of_touching(spheres: SphereSet, walls: WallSet, params: ContactParameters, step: StepInputs,
-                                history: ContactHistory, contacts: ContactHistory, found: WallSlots,
-                                wear: WearAccumulators, forces: SphereForces):
-        """Stage 2 over the spheres that stage 1 listed in ``found.touching`` (``wall_stage=
-        "compact"``): thread t computes the t-th listed sphere, so the few spheres with wall
-        contacts fill whole warps instead of one lane each in warps of idle spheres."""
-        t = wp.tid()
-        if t >= found.num_touching[0]:
-            return
-        i = found.touching[t]
-        wall_forces_of_sphere(i, found.count[i], spheres, walls, params, step, history, contacts, found, wear, forces)
-
-    @wp.kernel
     def collect_wall_contacts_and_forces(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
                                          params: ContactParameters, step: StepInputs, history: ContactHistory,
                                          contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
@@ -359,7 +326,7 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
             return
         wall_forces_of_sphere(i, n_found, spheres, walls, params, step, history, contacts, found, wear, forces)
 
-    return WallStageKernels(wall_forces, collect_wall_contacts_and_forces, wall_forces_of_touching)
+    return WallStageKernels(wall_forces, collect_wall_contacts_and_forces)
 
 
 def wall_forces_kernel(law: ContactLaw) -> "wp.Kernel":
