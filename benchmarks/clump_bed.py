@@ -34,6 +34,7 @@ from settled_bed import D, loose_fill, morton_order, settle_and_time  # noqa: E4
 import warpdem as wd  # noqa: E402
 from warpdem import geometry  # noqa: E402
 from warpdem.shapes import gravel_shape_mix, gravel_templates  # noqa: E402
+from warpdem.bench_settled_bed import quiet_warp  # noqa: E402
 
 
 def clump_fill(n: int, width: float, bound: float, rng: np.random.Generator) -> tuple[np.ndarray, float]:
@@ -104,8 +105,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--no-graph", action="store_true")
     ap.add_argument("--order", default="morton", choices=["morton", "grouped"], help="memory order of the bodies")
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     t0 = time.perf_counter()
     model, width, counts = build(args.bodies, args.worlds, args.rolling, device, args.max_contacts, args.fill,

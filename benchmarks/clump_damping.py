@@ -26,6 +26,7 @@ import warpdem as wd
 from calibration.experiments import make_experiment
 from calibration.materials import BulkMaterial
 from warpdem.contact.law import CLUMP_DAMPING_MASSES
+from warpdem.bench_settled_bed import quiet_warp
 
 ROD_MATERIAL = {"shape": "elongated", "aspect_ratio": 2.0, "diameter": [0.016, 0.020], "size_classes": 2}
 ROD_MATERIAL_QUICK = {**ROD_MATERIAL, "diameter": [0.024, 0.030]}  # as timestep_convergence.py at quick scale
@@ -43,8 +44,7 @@ def main(argv=None) -> int:
                     help="time step as a fraction of the Rayleigh time (default: the experiment's)")
     ap.add_argument("--processes", default="auto")
     args = ap.parse_args(argv)
-    wp.config.quiet = True  # stdout carries only the JSON lines
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()  # stdout carries only the JSON lines
     material = BulkMaterial.from_config(ROD_MATERIAL if args.scale == "paper" else ROD_MATERIAL_QUICK)
     per_fill: dict[tuple[str, float], list[float | None]] = {}
     for convention in args.conventions:

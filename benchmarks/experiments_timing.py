@@ -31,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import warpdem as wd  # noqa: E402
 from calibration.experiments import EXPERIMENTS, make_experiment  # noqa: E402
 from calibration.materials import BulkMaterial  # noqa: E402
+from warpdem.bench_settled_bed import quiet_warp  # noqa: E402
 
 MATERIALS = {
     "default": None,
@@ -70,8 +71,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--progress", action="store_true")
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     device = args.device or str(wp.get_preferred_device())
     names = list(EXPERIMENTS) if args.experiment == "all" else [args.experiment]
     extra = json.loads(args.settings)

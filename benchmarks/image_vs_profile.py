@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from calibration.experiments import make_experiment  # noqa: E402
 from calibration.materials import BulkMaterial  # noqa: E402
 from calibration.measurement import MeasurementError, measure_image, render_side_view  # noqa: E402
+from warpdem.bench_settled_bed import quiet_warp  # noqa: E402
 
 MATERIALS = {"default": None, "spheres": lambda: BulkMaterial.spheres(0.016, 0.020),
              "fine-spheres": lambda: BulkMaterial.spheres(0.008, 0.010)}
@@ -42,8 +43,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--processes", default="auto", help="CPU: worlds split over this many processes")
     ap.add_argument("--save-dir", default=None, help="write each pile (positions, radii, h_fill) as .npz here")
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     extra = {} if MATERIALS[args.material] is None else {"material": MATERIALS[args.material]()}
     exp = make_experiment("baffle", args.scale, fill_per_world=True, seed=args.seed, **extra)
     rng = np.random.default_rng(args.seed)

@@ -40,6 +40,7 @@ import warp as wp
 import warpdem as wd
 from warpdem import geometry
 from warpdem.shape_families import shape_family
+from warpdem.bench_settled_bed import quiet_warp
 
 SPEEDS = (0.25, 0.5, 1.0, 2.0, 4.0)  # impact speed [m/s]
 D = 0.016  # sphere diameter / rod volume-equivalent diameter [m]
@@ -155,8 +156,7 @@ def main(argv=None) -> int:
     ap.add_argument("--tangential", nargs="+", default=["history", "mindlin"], help="tangential sub-models to compare")
     ap.add_argument("--rolling", default="epsd2", help="rolling sub-model (none: no rolling resistance)")
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     rows = []
     for tangential in args.tangential:
         law = wd.ContactLaw(tangential=tangential, rolling=args.rolling)

@@ -22,16 +22,9 @@ import warp as wp
 import warpdem as wd
 
 from settled_bed import build, load_settled_state  # noqa: E402  (run from benchmarks/)
+from warpdem.bench_settled_bed import LEVER_VARIANTS, quiet_warp, time_steps  # noqa: E402
 
-OFF = dict(neighbour_layout="sphere_major", history_layout="sphere_major", fused_placement=False)
-VARIANTS = {  # every lever off, each alone, all; "default" is "auto" (all on a GPU, none on the CPU)
-    "off": OFF,
-    "neighbour_slot_major": {**OFF, "neighbour_layout": "slot_major"},
-    "history_slot_major": {**OFF, "history_layout": "slot_major"},
-    "fused_placement": {**OFF, "fused_placement": True},
-    "all": dict(neighbour_layout="slot_major", history_layout="slot_major", fused_placement=True),
-    "default": {},
-}
+VARIANTS = {**LEVER_VARIANTS, "default": {}}  # "default" is "auto" (all on a GPU, none on the CPU)
 
 
 def main(argv=None) -> list[dict]:
@@ -45,8 +38,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--max-contacts", type=int, default=12)
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, args.max_contacts, args.order)
     sims = {}
@@ -58,11 +50,7 @@ def main(argv=None) -> list[dict]:
     times: dict[str, list[float]] = {name: [] for name in VARIANTS}
     for r in range(args.rounds):
         for name in (list(VARIANTS) if r % 2 == 0 else list(VARIANTS)[::-1]):
-            wp.synchronize_device(device)
-            t0 = time.perf_counter()
-            sims[name].run(args.steps, check_every=args.steps)
-            wp.synchronize_device(device)
-            times[name].append((time.perf_counter() - t0) / args.steps * 1e3)
+            times[name].append(time_steps(sims[name], device, 0, args.steps) / args.steps * 1e3)
     out = []
     for name, sim in sims.items():
         t = np.array(times[name])

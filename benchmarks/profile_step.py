@@ -25,7 +25,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.bench_settled_bed import add_solver_options, solver_options
+from warpdem.bench_settled_bed import add_solver_options, quiet_warp, solver_options, used_solver_options
 
 from settled_bed import build, load_settled_state, min_bytes_per_sphere_step  # noqa: E402  (run from benchmarks/)
 from step_cost import kernel_breakdown  # noqa: E402
@@ -69,8 +69,7 @@ def main(argv=None):
     add_solver_options(ap)
     ap.add_argument("--load-state", default=None, metavar="NPZ", help="start from this settled State")
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, 12, args.order)
     sim = wd.Simulation(model, 5e-5, steps_per_graph=50, **solver_options(args))
@@ -79,15 +78,17 @@ def main(argv=None):
         sim.run(200, check_every=200)
     else:
         sim.run(int(args.settle_time / 5e-5), check_every=5000)
-    s, m, so = sim.state, model, sim.solver
+    m, so = model, sim.solver
+    # every closure reads sim.state when it runs: full_step swaps the States as a run does
 
     def place():
-        so.place_spheres(s)
+        so.place_spheres(sim.state)
 
     always = wp.ones(1, dtype=int, device=device)  # a rebuild flag that stays set
 
     def grid():
         """The neighbour search's own build (hash grid or cell list), as on a rebuild step."""
+        s = sim.state
         if so.cell_list is not None:
             so.cell_list.build(s.sphere_x, m.sphere_world, m.sphere_body, s.body_active, always)
         else:
@@ -95,10 +96,10 @@ def main(argv=None):
 
     def full_rebuild():
         so.request_neighbour_rebuild()
-        so._build_neighbour_list(s)
+        so._build_neighbour_list(sim.state)
 
     def rebuild_skipped():
-        so._build_neighbour_list(s)  # the flag is 0 after a build: what a step without a rebuild launches
+        so._build_neighbour_list(sim.state)  # the flag is 0 after a build: what a step without a rebuild launches
 
     def full_step():
         so.step(sim.state, sim._next)
@@ -116,7 +117,7 @@ def main(argv=None):
     if so.grid is not None:
         nb = wp.zeros(m.num_spheres, dtype=int, device=device)
         stages["grid_query_only"] = timed(lambda: wp.launch(count_neighbours, dim=m.num_spheres, inputs=[
-            so.grid.id, s.sphere_x, m.sphere_radius, m.sphere_world, m.max_radius, nb], device=device), device,
+            so.grid.id, sim.state.sphere_x, m.sphere_radius, m.sphere_world, m.max_radius, nb], device=device), device,
             args.repeats)
     # the contact kernel alone: re-run it through a step minus the others is awkward, so
     # time a step with the grid already built by patching build to a no-op
@@ -125,11 +126,11 @@ def main(argv=None):
     stages["step_without_grid_build"] = timed(full_step, device, args.repeats)
     del search.build  # the class's method again
     n = m.num_spheres
-    k_avg = float(s.contact_count.numpy().mean())
+    k_avg = float(sim.state.contact_count.numpy().mean())
     bytes_per_sphere = min_bytes_per_sphere_step(k_avg)
     ms = stages["full_step"]
     out = dict(device=str(wp.get_device(device)), spheres=n, order=args.order,
-               **solver_options(args),
+               **used_solver_options(so),
                state_from=args.load_state or f"{args.settle_time} s settled here", contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))

@@ -22,7 +22,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
-from warpdem.bench_settled_bed import add_solver_options, solver_options
+from warpdem.bench_settled_bed import add_solver_options, quiet_warp, solver_options, time_steps, used_solver_options
 
 PER_DRUM = 950  # a loose lattice holds ~950 in the drum's lower part (the paper fill settles to 1,648)
 DT = 8.2599588e-05
@@ -52,12 +52,8 @@ def drum_model(total: int, device: str):
 
 
 def per_step_ms(sim: wd.Simulation, steps: int, device: str) -> float:
-    sim.run(steps, check_every=steps)
-    wp.synchronize_device(device)
-    t0 = time.perf_counter()
-    sim.run(steps, check_every=steps)
-    wp.synchronize_device(device)
-    return (time.perf_counter() - t0) / steps * 1e3
+    """Milliseconds per step over ``steps`` steps after as many warm-up steps."""
+    return time_steps(sim, device, steps, steps) / steps * 1e3
 
 
 def kernel_breakdown(sim: wd.Simulation, steps: int) -> dict[str, float]:
@@ -81,8 +77,7 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=2000)
     add_solver_options(ap)
     args = ap.parse_args(argv)
-    wp.config.quiet = True
-    wp.config.log_level = getattr(wp, 'LOG_WARNING', wp.config.log_level)  # Warp >= 1.19: quiet is gone
+    quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)
@@ -93,7 +88,7 @@ def main(argv=None):
         plain_ms = per_step_ms(sim, max(50, args.steps // 10), device)
         kernels = kernel_breakdown(sim, 50) if wp.get_device(device).is_cuda else {}
         print(json.dumps(dict(case="drum-step-cost", device=wp.get_device(device).name, spheres=model.num_spheres,
-                              worlds=worlds, **solver_options(args),
+                              worlds=worlds, **used_solver_options(sim.solver),
                               graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
                               sphere_steps_per_s=float(f"{model.num_spheres / (graph_ms * 1e-3):.3g}"),
                               list_builds=int(sim.solver.list_builds.numpy()[0]), kernels_ms_per_step=kernels,

@@ -39,6 +39,7 @@ import numpy as np
 import warp as wp
 
 import warpdem as wd
+from warpdem.bench_settled_bed import quiet_warp
 from calibration.experiments import make_experiment
 from calibration.materials import BulkMaterial
 
@@ -61,13 +62,6 @@ SETTINGS = {"paper": {"baffle": {}, "drum": {"discard": 1, "record": 3}, "cylind
 def log(msg: str) -> None:
     """Progress on stderr (stdout carries only the JSON lines)."""
     print(msg, file=sys.stderr, flush=True)
-
-
-def quiet_warp() -> None:
-    """Keep Warp's banner and module-load messages off stdout (``quiet`` before Warp 1.19, ``log_level`` since)."""
-    wp.config.quiet = True
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
 
 
 def emit(record: dict) -> None:

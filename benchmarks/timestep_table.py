@@ -28,22 +28,23 @@ def mean_sem(values) -> tuple[float, float | None, int]:
 
 
 def pooled_fills(lines: list[dict]) -> dict:
-    """{(case, experiment, rpm, fraction): {"fills": {fill: (angle, density)}, "dt_s", "law", "wall_s"}}."""
+    """{(case, experiment, rpm, fraction): {"fills": {fill: (angle, density)}, "dt_s", "law"}} (records
+    written before the law was logged count as law "not recorded")."""
     out: dict = {}
     for rec in lines:
         if "angles_deg" not in rec:  # change lines: recomputed here from the pooled fills
             continue
         key = (rec["case"], rec["experiment"], rec["rpm"], rec["dt_rayleigh_fraction"])
-        entry = out.setdefault(key, {"fills": {}, "dt_s": rec["dt_s"], "law": rec["law"], "wall_s": []})
-        if not np.isclose(entry["dt_s"], rec["dt_s"], rtol=1e-6) or entry["law"] != rec["law"]:
-            raise SystemExit(f"timestep_table: {key} ran at {rec['dt_s']:.4g} s / {rec['law']} in one call and "
+        law = rec.get("law", "not recorded")
+        entry = out.setdefault(key, {"fills": {}, "dt_s": rec["dt_s"], "law": law})
+        if not np.isclose(entry["dt_s"], rec["dt_s"], rtol=1e-6) or entry["law"] != law:
+            raise SystemExit(f"timestep_table: {key} ran at {rec['dt_s']:.4g} s / {law} in one call and "
                              f"{entry['dt_s']:.4g} s / {entry['law']} in another: not the same experiment")
         densities = rec.get("bulk_densities") or [None] * len(rec["angles_deg"])
         for fill, angle, density in zip(rec["fill_indices"], rec["angles_deg"], densities):
             if fill in entry["fills"]:
                 raise SystemExit(f"timestep_table: fill {fill} of {key} appears twice")
             entry["fills"][fill] = (angle, density)
-        entry["wall_s"].append(rec["wall_s"])
     return out
 
 
@@ -67,9 +68,8 @@ def table(pooled: dict) -> str:
         for frac in sorted(by_frac, reverse=True):
             fills = by_frac[frac]["fills"]
             m, se, n = mean_sem(a for a, _ in fills.values())
-            dm, dse, dn = mean_sem(a for a, _ in (
-                (fills[f][0] - ref[f][0], None) for f in fills
-                if f in ref and fills[f][0] is not None and ref[f][0] is not None))
+            dm, dse, dn = mean_sem(fills[f][0] - ref[f][0] for f in fills
+                                   if f in ref and fills[f][0] is not None and ref[f][0] is not None)
             dens, dens_se, _ = mean_sem(d for _, d in fills.values())
             change = "(reference)" if frac == f_min else f"{fmt(dm, dse)} ({dn})"
             rows.append(f"| {case} | {exp} | {'' if rpm is None else f'{rpm:g}'} | {frac:g} | "

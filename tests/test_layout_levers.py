@@ -27,18 +27,14 @@ import pytest
 
 import warpdem as wd
 from warpdem import geometry, layouts
+from warpdem.bench_settled_bed import LEVER_VARIANTS, LEVERS_OFF
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_contact_stages import SCENES, run_scene  # noqa: E402
 
 # every lever off (the CPU's "auto"), and each lever alone or all on top of that
-OFF = dict(neighbour_layout="sphere_major", history_layout="sphere_major", fused_placement=False)
-LEVERS = {
-    "neighbour_slot_major": {**OFF, "neighbour_layout": "slot_major"},
-    "history_slot_major": {**OFF, "history_layout": "slot_major"},
-    "fused_placement": {**OFF, "fused_placement": True},
-    "all": dict(neighbour_layout="slot_major", history_layout="slot_major", fused_placement=True),
-}
+OFF = LEVERS_OFF
+LEVERS = {name: options for name, options in LEVER_VARIANTS.items() if name != "off"}
 
 
 def settle_scene() -> dict[str, np.ndarray]:

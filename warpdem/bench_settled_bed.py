@@ -57,6 +57,33 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                          f"flag: on; default {DEFAULT_FUSED_PLACEMENT}: on on a GPU)")
 
 
+#: the solver's layout levers (benchmarks/levers_gpu.sh, levers_ab.py, tests/test_layout_levers.py): every
+#: one off, each alone on top of that, and all; the solver's own "auto" picks "all" on a GPU, "off" on the CPU
+LEVERS_OFF = dict(neighbour_layout="sphere_major", history_layout="sphere_major", fused_placement=False)
+LEVER_VARIANTS = {
+    "off": LEVERS_OFF,
+    "neighbour_slot_major": {**LEVERS_OFF, "neighbour_layout": "slot_major"},
+    "history_slot_major": {**LEVERS_OFF, "history_layout": "slot_major"},
+    "fused_placement": {**LEVERS_OFF, "fused_placement": True},
+    "all": dict(neighbour_layout="slot_major", history_layout="slot_major", fused_placement=True),
+}
+
+
+def quiet_warp() -> None:
+    """Keep Warp's banner and module-load messages off stdout, so that a benchmark's stdout carries
+    only its JSON lines (``quiet`` before Warp 1.19, ``log_level`` since)."""
+    wp.config.quiet = True
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+
+
+def used_solver_options(solver: wd.DEMSolver) -> dict:
+    """The solver options a run actually used (``"auto"`` resolved), for its JSON line."""
+    return dict(neighbour_search=solver.neighbour_search, wall_stage=solver.wall_stage,
+                neighbour_layout=solver.neighbour_layout, history_layout=solver.history_layout,
+                fused_placement=solver.fused_placement)
+
+
 def solver_options(args: argparse.Namespace) -> dict:
     """The :class:`warpdem.Simulation` keyword arguments of :func:`add_solver_options`'s flags."""
     return dict(neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
@@ -176,7 +203,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--load-state", default=None, metavar="NPZ",
                     help="start from this settled State instead of settling")
     args = ap.parse_args(argv)
-    wp.config.quiet = True
+    quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     t0 = time.perf_counter()
     model, width = build(args.spheres, args.worlds, args.rolling, device, args.max_contacts, args.order)
@@ -204,9 +231,7 @@ def main(argv=None) -> dict:
         box_width_m=round(width, 4), settle_sim_time_s=round(settle_sim_time, 3), settle_wall_s=round(t_settle, 1),
         ke_per_particle_J=float(f"{ke.max():.3g}"), build_s=round(t_build, 1), warp=wp.config.version,
         graph=sim.use_graph, order=args.order, conditional_rebuild=args.conditional_rebuild,
-        neighbour_search=sim.solver.neighbour_search, wall_stage=sim.solver.wall_stage,
-        neighbour_layout=sim.solver.neighbour_layout, history_layout=sim.solver.history_layout,
-        fused_placement=sim.solver.fused_placement, state_from=args.load_state or "settled here",
+        **used_solver_options(sim.solver), state_from=args.load_state or "settled here",
         min_bytes_per_sphere_step=round(bytes_per_sphere),
         effective_GBps=round(n_total * args.steps * bytes_per_sphere / seconds / 1e9, 1),
         list_builds=int(sim.solver.list_builds.numpy()[0]), date=time.strftime("%Y-%m-%d"))
