@@ -123,10 +123,10 @@ def test_unused_up_front_designs_of_an_adequate_base_model_are_said_and_counted(
     assert up["unused_versions"] == ["rolling_resistance", "cohesion", "shape"]
     assert up["worlds_run"] == 2 * N_DESIGN_SETS and up["worlds_used"] == 2 * 16
     err = capsys.readouterr().err
-    assert "144 design world(s) of rolling_resistance, cohesion, shape run up front were not used" in err
+    assert "144 design world(s) of rolling_resistance, cohesion, shape asked for up front were not used" in err
 
 
-def test_auto_is_off_on_the_cpu_and_on_on_a_cuda_superset_model(tmp_path):
+def test_auto_is_off_on_the_cpu_and_on_on_a_cuda_superset_model():
     import warpdem as wd
     from calibration.model_description import ModelDescription
     from validation.dem_forward import DEMForwardModel

@@ -14,7 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from test_diagnosis_logic import BASE, COHESION, FAST, ROLLING, SHAPE, TRUTHS, AnalyticGranularModel, lab_observables  # noqa: E402
 
-from validation.design import design_replicates, pooled_noise_sd  # noqa: E402
+from validation.design import NoiseNotMeasurable, design_replicates, pooled_noise_sd  # noqa: E402
 from validation.diagnose import diagnose  # noqa: E402
 from validation.forward import ForwardRunner, replicate_counts  # noqa: E402
 from validation.settings import DiagnosisSettings  # noqa: E402
@@ -28,7 +28,15 @@ def test_design_replicates_spreads_the_replicated_sets_and_keeps_a_minimum():
     assert sum(c == 2 for c in design_replicates(6, 2, 0.1)) == 3  # at least 3 sets measure the noise
     assert design_replicates(2, 3, 0.1) == (3, 3)  # fewer sets than the minimum: all
     assert sum(c == 2 for c in design_replicates(6, 2, 1 / 3, minimum=0)) == 2  # a refinement wave
-    assert design_replicates(24, 2, 0.25) == design_replicates(24, 2, 0.25)  # deterministic
+    # evenly spread and fixed (the up-front call and the study must ask for the same worlds)
+    assert design_replicates(24, 2, 0.25) == (2, 1, 1, 1, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 2)
+
+
+def test_noise_without_replicated_sets_names_the_settings_to_change():
+    Y = np.arange(12.0).reshape(6, 2, 1)
+    Y[:, 1, :] = np.nan  # every set's second fill failed (or was never asked for)
+    with pytest.raises(NoiseNotMeasurable, match="replicated_fraction"):
+        pooled_noise_sd(Y, ("pile",))
 
 
 def test_settings_and_counts_refuse_what_is_not_a_fraction_or_a_count():

@@ -230,6 +230,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
         return _prefetch(keys, space, cands, forward, settings, args.prefetch)
+    from .design import NoiseNotMeasurable
     from .pooled import PooledForward, run_as_workers
 
     # one forward model for every config; requests made at the same time (candidates of a ranking
@@ -248,6 +249,9 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
                 "the DEM worlds run so far are lost")
         print(f"warpdem diagnose: interrupted after {time.perf_counter() - t0:.0f} s; {kept}", file=sys.stderr)
         return 130
+    except NoiseNotMeasurable as exc:
+        print(f"warpdem diagnose: {exc}", file=sys.stderr)
+        return 2
     wall = round(time.perf_counter() - t0, 1)
     for (path, *_, out), result in zip(jobs, results):
         paths = result.write(out)

@@ -26,6 +26,7 @@ from calibration.designs import latin_hypercube
 
 from .effects import ModelVersion
 from .forward import ForwardRunner
+from .settings import DiagnosisSettings
 
 __all__ = ["DesignData", "run_design", "evaluate_sets", "design_replicates", "pooled_noise_sd"]
 
@@ -99,20 +100,32 @@ def evaluate_sets(version: ModelVersion, runner: ForwardRunner, keys: Sequence[s
     return DesignData(X, Y, tuple(keys))
 
 
+class NoiseNotMeasurable(ValueError):
+    """No design set has two successful fills of an observable, so its DEM noise is unknown (a
+    user-fixable setting: ``replicates``, ``replicated_fraction``)."""
+
+
+def design_size(version: ModelVersion, settings: DiagnosisSettings) -> int:
+    """Latin-hypercube size of one model version's design:
+    ``max(min_design_points, design_points_per_parameter * parameters)``."""
+    return max(settings.min_design_points, settings.design_points_per_parameter * version.space.dim)
+
+
 def pooled_noise_sd(Y: np.ndarray, keys: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray]:
     """Pooled fill-to-fill standard deviation per observable and its degrees of freedom.
 
     Y : (n_sets, replicates, m), NaN ignored.  Returns ``(sd (m,), dof (m,))``; an observable whose
     replicates are identical in every set gets sd 0 and dof 0.
-    Raises if an observable has no set with two successful replicates.
+    Raises :class:`NoiseNotMeasurable` if an observable has no set with two successful replicates.
     """
     Y = np.asarray(Y, float)
     ok = np.isfinite(Y)
     n_k = ok.sum(axis=1)  # (n, m)
     if np.any(np.all(n_k < 2, axis=0)):
         bad = [keys[j] if j < len(keys) else str(j) for j in np.flatnonzero(np.all(n_k < 2, axis=0))]
-        raise ValueError(f"cannot measure the DEM fill-to-fill noise of {bad}: no parameter set has two successful "
-                         "replicates (use replicates >= 2)")
+        raise NoiseNotMeasurable(f"cannot measure the DEM fill-to-fill noise of {bad}: no parameter set has two successful "
+                         "replicates (use replicates >= 2; with diagnosis.replicated_fraction below 1, a larger "
+                         "fraction gives more replicated sets)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         mean_k = np.nanmean(Y, axis=1, keepdims=True)

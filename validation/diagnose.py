@@ -55,7 +55,7 @@ from threadpoolctl import threadpool_limits
 
 from calibration.designs import ParameterSpace, latin_hypercube
 
-from .design import DesignData, design_replicates, evaluate_sets
+from .design import DesignData, design_replicates, design_size, evaluate_sets
 from .discrimination import Discrimination, discriminate
 from .effects import CandidateEffect, ModelVersion
 from .forward import ForwardModel, ForwardRunner, merges_versions, runs_on_cuda, worlds_per_run
@@ -216,11 +216,6 @@ def _round_seed(settings: DiagnosisSettings, step: int) -> int:
     return settings.seed + 1000 * (step + 1)
 
 
-def design_size(version: ModelVersion, settings: DiagnosisSettings) -> int:
-    """Latin-hypercube size of one model version's design."""
-    return max(settings.min_design_points, settings.design_points_per_parameter * version.space.dim)
-
-
 def planned_designs(base_space: ParameterSpace, candidates: Sequence[CandidateEffect],
                     settings: DiagnosisSettings | None = None) -> list[tuple[ModelVersion, int, int]]:
     """(model version, number of sets, seed) of every design a diagnosis runs before it knows the
@@ -356,7 +351,7 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
         by_name = {c.name: c for c in ranked}
         disc = discriminate({n: by_name[n].study for n in tied}, {n: by_name[n].effect.words for n in tied},
                             tuple(model.proposals()), runner, settings.replicates, settings.separation_sigma,
-                            seed=seed)
+                            seed=seed, replicated_fraction=settings.replicated_fraction)
     return RankingRound(current, ranked, tied, disc, None, "")
 
 
@@ -518,7 +513,7 @@ def _designs_used(record: dict[str, Any], used: Sequence[str]) -> None:
     record["unused_versions"] = unused
     if unused:
         _say(f"the base model needs no ranking, so the {record['worlds_run'] - record['worlds_used']} design "
-             f"world(s) of {', '.join(unused)} run up front were not used ({record['worlds_used']} of "
+             f"world(s) of {', '.join(unused)} asked for up front were not used ({record['worlds_used']} of "
              f"{record['worlds_run']} were; designs_up_front: {str(record['setting']).lower()})")
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from calibration.designs import ParameterSpace
 
-from .design import DesignData, pooled_noise_sd
+from .design import DesignData, design_replicates, pooled_noise_sd
 from .forward import ForwardRunner, ProposedMeasurement
 from .study import ModelStudy
 from .surrogates import fit_surrogates
@@ -68,10 +68,12 @@ class Discrimination:
 
 
 def _predictive(study: ModelStudy, keys: Sequence[str], runner: ForwardRunner, replicates: int,
-                n_posterior: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Posterior predictive mean, sd (per key) and DEM noise sd at the proposed conditions."""
+                n_posterior: int, seed: int, replicated_fraction: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Posterior predictive mean, sd (per key) and DEM noise sd at the proposed conditions (the
+    study's design sets, ``replicates`` fills on the ``replicated_fraction`` of them)."""
     version = study.version
-    Y = runner(version.effect_names, version.parameter_sets(study.design.X), replicates, tuple(keys))
+    counts = design_replicates(len(study.design.X), replicates, replicated_fraction)
+    Y = runner(version.effect_names, version.parameter_sets(study.design.X), counts, tuple(keys))
     design = DesignData(study.design.X, Y, tuple(keys))
     noise, _ = pooled_noise_sd(Y, keys)
     space: ParameterSpace = version.space
@@ -83,11 +85,14 @@ def _predictive(study: ModelStudy, keys: Sequence[str], runner: ForwardRunner, r
 
 def discriminate(studies: Mapping[str, ModelStudy], labels: Mapping[str, str],
                  proposals: Sequence[ProposedMeasurement], runner: ForwardRunner, replicates: int = 2,
-                 threshold: float = 2.0, n_posterior: int = 2000, seed: int = 0) -> Discrimination:
+                 threshold: float = 2.0, n_posterior: int = 2000, seed: int = 0,
+                 replicated_fraction: float = 1.0) -> Discrimination:
     """Forecast every proposal under every tied candidate; name the one that separates them best.
 
     studies : candidate name -> its study (at least two).
     labels : candidate name -> words for sentences.
+    replicates, replicated_fraction : fills per design set at the proposed conditions, as in the
+        designs (:func:`validation.design.design_replicates`).
     """
     names = tuple(studies)
     if len(names) < 2:
@@ -101,7 +106,8 @@ def discriminate(studies: Mapping[str, ModelStudy], labels: Mapping[str, str],
     dup = sorted({k for k in keys if keys.count(k) > 1})
     if dup:
         raise ValueError(f"proposed measurement keys must be unique; duplicated: {dup}")
-    pred = {n: _predictive(studies[n], keys, runner, replicates, n_posterior, seed) for n in names}
+    pred = {n: _predictive(studies[n], keys, runner, replicates, n_posterior, seed, replicated_fraction)
+            for n in names}
     forecasts = []
     for c, p in enumerate(proposals):
         if p.expected_standard_error is not None:

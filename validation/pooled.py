@@ -31,7 +31,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .forward import ForwardModel, ProposedMeasurement, evaluate_counts, replicate_counts
+from .forward import ForwardModel, ProposedMeasurement, evaluate_counts, merges_versions, replicate_counts
 
 __all__ = ["PooledForward", "run_as_workers"]
 
@@ -149,7 +149,7 @@ class PooledForward(ForwardModel):
         """(Lock held.) One merged call of the inner model, then every request's own answer."""
         inner = self.inner
         try:
-            if getattr(inner, "superset", False):
+            if merges_versions(inner):
                 # every distinct (padded) set once, with the most fills any request asks of it: one call
                 # when the inner model takes per-set counts, else one per count (evaluate_counts)
                 all_effects = tuple(inner.effects)

@@ -59,10 +59,12 @@ class DiagnosisSettings:
         experiment for the DEM), and the studies take their designs from its answer. Only a
         forward model that answers every model version in one call takes part (the superset
         protocol of :class:`validation.forward.ForwardModel`); with another model the setting does
-        nothing. The result's numbers are those of a run with it off; only the number and size of
-        forward-model calls change (and, when the base model turns out adequate, the candidates'
-        designs were run for nothing: the result's ``forward_model.designs_up_front`` says how
-        many). ``"auto"``: on when the forward model runs on a CUDA device, where one launch of
+        nothing. The designs, seeds and parameter sets are those of a run with it off; only the
+        number and size of forward-model calls change (a model whose runs depend only on the set
+        gives the same numbers; the DEM numbers a new world's fill in launch order, so from an empty
+        cache its results move within the fill-to-fill noise). When the base model turns out
+        adequate, the candidates' designs were run for nothing (the result's
+        ``forward_model.designs_up_front`` says how many). ``"auto"``: on when the forward model runs on a CUDA device, where one launch of
         N + M worlds costs far less than launches of N and of M; off on the CPU, where the worlds
         cost the same either way and an adequate base model would waste the candidates' designs.
     """

@@ -29,7 +29,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .adequacy import Adequacy, judge_adequacy
-from .design import DesignData, design_replicates, evaluate_sets, pooled_noise_sd, run_design
+from .design import DesignData, design_replicates, design_size, evaluate_sets, pooled_noise_sd, run_design
 from .effects import ModelVersion
 from .evidence import Evidence, estimate_log_evidence, information_criteria
 from .forward import ForwardRunner
@@ -267,8 +267,8 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
     keys = observations.keys
     space = version.space
     if design is None:
-        n = max(settings.min_design_points, settings.design_points_per_parameter * space.dim)
-        design = run_design(version, runner, keys, n, settings.replicates, seed, settings.replicated_fraction)
+        design = run_design(version, runner, keys, design_size(version, settings), settings.replicates, seed,
+                            settings.replicated_fraction)
     noise_sd, noise_dof = pooled_noise_sd(design.Y, keys)
     if noise is not None:
         given_sd, given_dof = (np.asarray(a, float) for a in noise)
@@ -349,7 +349,7 @@ def refine_study(study: ModelStudy, observations: Observations, runner: ForwardR
             pool = current.scan.U[np.argsort(mi)[:max(settings.refine_points * 4, len(mi) // 50)]]
         U_new = _maximin_subset(pool, settings.refine_points, version.space.to_unit(design.X))
         new = evaluate_sets(version, runner, keys, version.space.from_unit(U_new),
-                            design_replicates(len(U_new), settings.replicates, settings.replicated_fraction, 0))
+                            design_replicates(len(U_new), settings.replicates, settings.replicated_fraction, minimum=0))
         refined = study_model(version, observations, runner, settings, seed + 7919 * k, design.extended(new),
                               waves=current.waves + 1, noise=noise)
         pending = (pending if unconditional else []) + [refined.confirmation]
