@@ -568,7 +568,9 @@ class DEMSolver:
         wall contacts, wall forces and wear, particle forces (:mod:`warpdem.stages`), from
         ``state_in``'s history into ``state_out``'s, forces into ``sphere_f``/``sphere_t``.
         ``walls_on=False`` leaves the walls out (profiling); a model without walls skips the
-        wall stages too. The wall stages are two kernels or one (``wall_stage``)."""
+        wall stages too. The wall stages are two kernels or one (``wall_stage``). The stages read the
+        packed sphere views: with ``fused_placement`` those of the State the last step wrote, so call
+        :meth:`place_spheres` on ``state_in`` first when it is another State."""
         m = self.model
         d = m.device
         n = m.num_spheres
