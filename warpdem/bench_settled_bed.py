@@ -33,8 +33,8 @@ import warp as wp
 import warpdem as wd
 from warpdem import geometry
 from warpdem.solver import (DEFAULT_FUSED_PLACEMENT, DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT,
-                            DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS,
-                            WALL_STAGES)
+                            DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_CANDIDATES, DEFAULT_WALL_STAGE,
+                            NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
 
 D = 0.018
 R = D / 2
@@ -55,6 +55,9 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                     choices=["auto", "on", "off"],
                     help="the integrator places the member spheres, no placement launch per step (bare "
                          f"flag: on; default {DEFAULT_FUSED_PLACEMENT}: on on a GPU)")
+    ap.add_argument("--wall-candidates", type=int, default=DEFAULT_WALL_CANDIDATES,
+                    help="slots per sphere for the moving walls' triangles it may touch, kept between "
+                         f"gatherings (0: query the moving walls' BVHs every step; default {DEFAULT_WALL_CANDIDATES})")
 
 
 #: the solver's layout levers (benchmarks/levers_gpu.sh, levers_ab.py, tests/test_layout_levers.py): every
@@ -81,14 +84,14 @@ def used_solver_options(solver: wd.DEMSolver) -> dict:
     """The solver options a run actually used (``"auto"`` resolved), for its JSON line."""
     return dict(neighbour_search=solver.neighbour_search, wall_stage=solver.wall_stage,
                 neighbour_layout=solver.neighbour_layout, history_layout=solver.history_layout,
-                fused_placement=solver.fused_placement)
+                fused_placement=solver.fused_placement, wall_candidates=solver.wall_candidates)
 
 
 def solver_options(args: argparse.Namespace) -> dict:
     """The :class:`warpdem.Simulation` keyword arguments of :func:`add_solver_options`'s flags."""
     return dict(neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
                 neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
-                fused_placement=args.fused_placement)
+                fused_placement=args.fused_placement, wall_candidates=args.wall_candidates)
 
 
 

@@ -575,6 +575,7 @@ class WallSet:
     origin: wp.array(dtype=wp.vec3)  # rotation centre c0 at rest [m]
     t_start: wp.array(dtype=float)  # motion window [t_start, t_stop) [s]
     t_stop: wp.array(dtype=float)
+    reach: wp.array(dtype=float)  # largest distance of a rest-mesh vertex from the origin c0 [m]
 
 
 @wp.struct

@@ -31,6 +31,16 @@ DEFAULT_NEIGHBOUR_LAYOUT = "auto"
 DEFAULT_HISTORY_LAYOUT = "auto"
 # whether the integrator places the member spheres (DEMSolver's fused_placement); "auto" picks by device
 DEFAULT_FUSED_PLACEMENT = "auto"
+# slots per sphere for the triangles of moving walls it may touch (DEMSolver's wall_candidates);
+# 0: query the moving walls' BVHs every step
+DEFAULT_WALL_CANDIDATES = 32
+
+
+def wall_reach(wall) -> float:
+    """Largest distance [m] of a wall's rest-mesh vertex from its motion's origin c0 (bounds how
+    far the wall's rotation carries a touching sphere, :func:`~warpdem.stages.wall_contacts.wall_drift`)."""
+    v = np.asarray(wall.vertices, dtype=np.float64) - np.asarray(wall.motion.origin, dtype=np.float64)
+    return float(np.sqrt((v * v).sum(axis=1).max())) if len(v) else 0.0
 
 
 def resolve_performance_options(on_gpu: bool, neighbour_layout: str = "auto", history_layout: str = "auto",
@@ -166,6 +176,13 @@ class DEMSolver:
             and when a list rebuild was requested before the step (:meth:`request_neighbour_rebuild`,
             or a kernel that sets ``rebuild[0]``). Code that changes a State's bodies between steps
             some other way must call :meth:`invalidate_views`. Same results, bit for bit.
+        wall_candidates: slots per sphere for the triangles of the moving walls of its world that
+            it may touch (default 32): each sphere gathers them from the walls' BVHs within
+            r + skin and tests only these each step, until it has moved more than skin / 2 or a
+            wall's motion has carried it more than skin / 2 through the wall's rest frame
+            (:func:`~warpdem.stages.wall_contacts.moving_wall_candidates`); a sphere with more
+            candidates queries the BVHs each step until its next gathering. 0: every sphere of a
+            world with a moving wall queries its BVHs every step. Same results, bit for bit.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
@@ -173,7 +190,8 @@ class DEMSolver:
                  conditional_rebuild: bool = False, v_max: float | None = None,
                  neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH, wall_stage: str = DEFAULT_WALL_STAGE,
                  neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT, history_layout: str = DEFAULT_HISTORY_LAYOUT,
-                 fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT) -> None:
+                 fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT,
+                 wall_candidates: int = DEFAULT_WALL_CANDIDATES) -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
         if neighbour_search not in NEIGHBOUR_SEARCHES:
@@ -247,6 +265,17 @@ class DEMSolver:
         self.nb_overflow = wp.zeros(2, dtype=int, device=d)  # [dropped, largest list needed]
         self.list_builds = wp.zeros(1, dtype=int, device=d)
         self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
+        self.wall_reach = wp.array([wall_reach(w) for w in model.walls] or [0.0], dtype=float, device=d)
+        if isinstance(wall_candidates, bool) or not isinstance(wall_candidates, (int, np.integer)) or wall_candidates < 0:
+            raise ConfigError(f"wall_candidates must be an integer >= 0 (slots per sphere), got {wall_candidates!r}")
+        # slots only where a moving wall exists
+        self.wall_candidates = int(wall_candidates) if any(not w.motion.is_static for w in model.walls) else 0
+        cand_rows = n if self.wall_candidates else 1
+        self.candidate_count = wp.full(cand_rows, int(stages.CANDIDATES_UNSET), dtype=int, device=d)
+        self.candidate_wall = wp.zeros(max(cand_rows * self.wall_candidates, 1), dtype=int, device=d)
+        self.candidate_triangle = wp.zeros(max(cand_rows * self.wall_candidates, 1), dtype=int, device=d)
+        self.candidate_x = wp.zeros(cand_rows, dtype=wp.vec3, device=d)
+        self.candidate_t = wp.zeros(cand_rows, dtype=wp.float64, device=d)
         self.stages = stages.contact_stages(model.contact_law, neighbour_layout, history_layout)
         self.pack_contact_inputs()
         self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
@@ -478,6 +507,13 @@ class DEMSolver:
         walls.origin = m.wall_origin
         walls.t_start = m.wall_t_start
         walls.t_stop = m.wall_t_stop
+        walls.reach = self.wall_reach
+        candidates = stages.MovingWallCandidates()
+        candidates.count, candidates.wall, candidates.triangle = (self.candidate_count, self.candidate_wall,
+                                                                  self.candidate_triangle)
+        candidates.x_built, candidates.t_built = self.candidate_x, self.candidate_t
+        candidates.capacity = self.wall_candidates
+        candidates.margin = float(self.skin)
         params = stages.ContactParameters()
         params.youngs_modulus = m.mat_e
         params.poisson_ratio = m.mat_nu
@@ -495,7 +531,7 @@ class DEMSolver:
         forces = stages.SphereForces()
         forces.force = self.sphere_f
         forces.torque = self.sphere_t
-        self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces)
+        self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces, candidates)
         members = kernels.MemberPlacement()
         members.body, members.first, members.count = m.sphere_body, m.body_first, m.body_count
         members.mass, members.inertia = m.body_mass, m.body_inertia
@@ -582,11 +618,11 @@ class DEMSolver:
         contacts = self._history(state_out)
         if walls_on and self.wall_stage == "fused":
             wp.launch(st.collect_wall_contacts_and_forces, dim=n, inputs=[
-                p.spheres, p.neighbours, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
-                device=d)
+                p.spheres, p.neighbours, p.walls, p.params, step, p.candidates, history, contacts, p.found, p.wear,
+                p.forces], device=d)
         elif walls_on:
             wp.launch(st.collect_wall_contacts, dim=n,
-                      inputs=[p.spheres, p.neighbours, p.walls, step, contacts, p.found], device=d)
+                      inputs=[p.spheres, p.neighbours, p.walls, step, p.candidates, contacts, p.found], device=d)
             wp.launch(st.wall_forces, dim=n,
                       inputs=[p.spheres, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
                       device=d)
@@ -670,7 +706,7 @@ class Simulation:
     even so that the state parity is preserved) and replayed. The solver options
     (``neighbour_skin``, ``max_neighbours``, ``conditional_rebuild``, ``v_max``,
     ``neighbour_search``, ``wall_stage``, ``neighbour_layout``, ``history_layout``,
-    ``fused_placement``) are passed to :class:`DEMSolver`.
+    ``fused_placement``, ``wall_candidates``) are passed to :class:`DEMSolver`.
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
@@ -679,7 +715,8 @@ class Simulation:
                  v_max: float | None = None, neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH,
                  wall_stage: str = DEFAULT_WALL_STAGE, neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT,
                  history_layout: str = DEFAULT_HISTORY_LAYOUT,
-                 fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT) -> None:
+                 fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT,
+                 wall_candidates: int = DEFAULT_WALL_CANDIDATES) -> None:
         self.model = model
         # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
         # "freeze" (the world stays frozen and is listed, the others run on)
@@ -688,7 +725,7 @@ class Simulation:
                                 max_neighbours=max_neighbours, conditional_rebuild=conditional_rebuild,
                                 v_max=v_max, neighbour_search=neighbour_search, wall_stage=wall_stage,
                                 neighbour_layout=neighbour_layout, history_layout=history_layout,
-                                fused_placement=fused_placement)
+                                fused_placement=fused_placement, wall_candidates=wall_candidates)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0

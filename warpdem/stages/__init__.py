@@ -4,8 +4,9 @@
 stage (module)              job                                             writes
 ==========================  ==============================================  ==========================
 1 ``collect_wall_contacts`` wall candidates from each wall's rest-frame     wall slots (tag, normal,
-  (wall_contacts)           BVH, merged so that one physical contact is     point, depth, triangle)
-                            one slot
+  (wall_contacts)           BVH (moving walls: the sphere's kept            point, depth, triangle);
+                            candidate triangles), merged so that one        kept candidates
+                            physical contact is one slot
 2 ``wall_forces``           wall forces with tangential/rolling history,    history springs, per-sphere
   (wall_contacts)           wall wear (relative wear model)                 force/torque, wear
 3 ``particle_forces``       sphere-sphere forces over the Verlet list,      history, per-sphere
@@ -34,11 +35,12 @@ import warp as wp
 from ..contact.law import ContactLaw
 from ..layouts import DEFAULT_SLOT_LAYOUT
 from .particle_contacts import particle_forces_kernel
-from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
-                      WallSlots, WearAccumulators)
+from .structs import (CANDIDATES_OVERFLOW, CANDIDATES_UNSET, ContactHistory, ContactParameters, MovingWallCandidates,
+                      NeighbourList, SphereForces, SphereSet, StepInputs, WallSet, WallSlots, WearAccumulators)
 from .wall_contacts import collect_wall_contacts_kernel, wall_stage_kernels
 
-__all__ = ["ContactStages", "contact_stages", "PackedInputs", "ContactHistory", "ContactParameters", "NeighbourList",
+__all__ = ["ContactStages", "contact_stages", "PackedInputs", "CANDIDATES_OVERFLOW", "CANDIDATES_UNSET",
+           "ContactHistory", "ContactParameters", "MovingWallCandidates", "NeighbourList",
            "SphereForces", "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
 
 
@@ -65,6 +67,7 @@ class PackedInputs:
     found: WallSlots
     wear: WearAccumulators
     forces: SphereForces
+    candidates: MovingWallCandidates
 
 
 @functools.lru_cache(maxsize=None)

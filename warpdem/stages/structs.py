@@ -15,8 +15,8 @@ import warp as wp
 
 from ..kernels import NeighbourList, SphereView, WallSet
 
-__all__ = ["ContactHistory", "ContactParameters", "NeighbourList", "SphereForces", "SphereSet", "StepInputs",
-           "WallSet", "WallSlots", "WearAccumulators"]
+__all__ = ["ContactHistory", "ContactParameters", "MovingWallCandidates", "NeighbourList", "SphereForces",
+           "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
 
 
 @wp.struct
@@ -72,6 +72,31 @@ class WallSlots:
     point: wp.array(dtype=wp.vec3)  # contact point on the wall, world frame [m]
     depth: wp.array(dtype=float)  # overlap r_i - distance [m]
     triangle: wp.array(dtype=int)  # triangle of the wall (for wear)
+
+
+#: ``MovingWallCandidates.count`` of a sphere whose candidates were never gathered
+CANDIDATES_UNSET = wp.constant(-2)
+#: ``MovingWallCandidates.count`` of a sphere with more candidates than slots (its moving walls'
+#: BVHs are queried every step until the next gathering)
+CANDIDATES_OVERFLOW = wp.constant(-1)
+
+
+@wp.struct
+class MovingWallCandidates:
+    """Per sphere: the triangles of the moving walls of its world that it may touch before it or a
+    wall has moved by more than ``margin / 2`` (the collection stage gathers them from the walls'
+    BVHs and then tests only these, see :func:`~.wall_contacts.wall_collection_function`).
+
+    Candidate ``s`` of sphere ``i`` is entry ``i * capacity + s``, grouped by wall in the world's
+    wall order and in each wall's BVH order."""
+
+    count: wp.array(dtype=int)  # candidates per sphere; CANDIDATES_UNSET or CANDIDATES_OVERFLOW
+    wall: wp.array(dtype=int)  # wall index k of each candidate
+    triangle: wp.array(dtype=int)  # triangle of that wall
+    x_built: wp.array(dtype=wp.vec3)  # sphere centre when they were gathered [m]
+    t_built: wp.array(dtype=wp.float64)  # simulated time then [s]
+    capacity: int  # slots per sphere (0: no candidates are kept, every step queries the BVHs)
+    margin: float  # triangles within r + margin of the sphere are gathered [m]
 
 
 @wp.struct

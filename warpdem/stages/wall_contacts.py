@@ -9,6 +9,12 @@ A wall moves rigidly: a point x0 of its rest mesh is at x(t) = c(t) + R(w tau) (
 mesh is never moved: a sphere at x is looked up in the rest mesh at x0 = c0 + R^T (x - c(t))
 (:func:`warpdem.kernels.point_in_wall_rest_frame`) and the closest point and normal found
 there are mapped back to the world frame.
+
+Moving walls: each sphere keeps the triangles it may touch (:class:`~.structs.MovingWallCandidates`,
+gathered from the BVHs within r + skin) and gathers them again only when it or a wall has moved
+enough to make them stale (:func:`moving_wall_candidates`), so most steps test a few triangles
+instead of traversing a BVH. The triangles come in the BVH's order either way: same results, bit
+for bit (``DEMSolver(wall_candidates=0)`` queries every step).
 """
 from __future__ import annotations
 
@@ -21,13 +27,95 @@ from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
 from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, closest_point_triangle, effective_shear_modulus,
                        damping_mass_function, effective_youngs_modulus, point_in_wall_rest_frame, wall_is_moving,
-                       wall_point_velocity)
+                       wall_motion_time, wall_point_velocity)
 from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
 from .law import law_evaluator
-from .structs import (ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSet,
-                      WallSlots, WearAccumulators)
+from .structs import (CANDIDATES_OVERFLOW, CANDIDATES_UNSET, ContactHistory, ContactParameters, MovingWallCandidates,
+                      NeighbourList, SphereForces, SphereSet, StepInputs, WallSet, WallSlots, WearAccumulators)
 
 wp.set_module_options({"enable_backward": False, "fast_math": True})
+
+
+@wp.func
+def wall_drift(t_then: wp.float64, t_now: wp.float64, ri: float, world: int, walls: WallSet) -> float:
+    """Bound on how far [m] a sphere of radius ``ri`` that touches a moving wall of ``world`` at
+    ``t_now`` has moved in that wall's rest frame since ``t_then`` through the walls' motion alone
+    (its own motion adds at most its displacement). A rigid wall turns by dtheta = |w| dtau and
+    its centre moves by |v| dtau (dtau: elapsed motion time between the two instants); the rest
+    point x0 = c0 + R^T (x - c(t)) then moves by at most dtheta (reach + r_i) + |v| dtau, since
+    |x - c(t)| <= reach + r_i for a touching sphere and |R(a) - R(b)| <= |a - b| for rotations about one
+    axis (reach: the wall's largest vertex distance from its centre)."""
+    first = walls.world_start[world]
+    drift = float(0.0)
+    for kk in range(walls.world_start[world + 1] - first):
+        k = walls.world_index[first + kk]
+        if walls.moving[k] == 0:
+            continue
+        tau_now = wall_motion_time(t_now, walls.t_start[k], walls.t_stop[k])
+        tau_then = wall_motion_time(t_then, walls.t_start[k], walls.t_stop[k])
+        dtau = float(wp.abs(tau_now - tau_then))
+        d = wp.length(walls.ang_vel[k]) * dtau * (walls.reach[k] + ri) + wp.length(walls.lin_vel[k]) * dtau
+        drift = wp.max(drift, d)
+    return drift
+
+
+@wp.func
+def gather_moving_wall_candidates(i: int, xi: wp.vec3, ri: float, world: int, t_now: wp.float64, walls: WallSet,
+                                  candidates: MovingWallCandidates) -> int:
+    """Gather the triangles of the moving walls of ``world`` whose bounds meet the box
+    x0 +- (r_i + margin) around sphere i's rest-frame centre x0 at ``t_now`` (each wall's BVH, in
+    the world's wall order); record the sphere's centre ``xi`` [m] and the time. Returns the count,
+    or CANDIDATES_OVERFLOW if they do not fit the slots."""
+    first = walls.world_start[world]
+    cap = candidates.capacity
+    half_box = ri + candidates.margin
+    ext = wp.vec3(half_box, half_box, half_box)
+    n = int(0)
+    for kk in range(walls.world_start[world + 1] - first):
+        k = walls.world_index[first + kk]
+        if walls.moving[k] == 0:
+            continue
+        x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, walls.t_start[k], walls.t_stop[k],
+                                                      walls.origin[k], walls.lin_vel[k], walls.ang_vel[k])
+        mquery = wp.mesh_query_aabb(walls.mesh[k], x_rest - ext, x_rest + ext)
+        tri = int(0)
+        while wp.mesh_query_aabb_next(mquery, tri):
+            if n < cap:
+                candidates.wall[i * cap + n] = k
+                candidates.triangle[i * cap + n] = tri
+            n += 1
+    candidates.x_built[i] = xi
+    candidates.t_built[i] = t_now
+    if n > cap:
+        n = CANDIDATES_OVERFLOW
+    candidates.count[i] = n
+    return n
+
+
+@wp.func
+def moving_wall_candidates(i: int, xi: wp.vec3, ri: float, world: int, t_now: wp.float64, walls: WallSet,
+                           candidates: MovingWallCandidates) -> int:
+    """Sphere i's candidate count for this step (gathered again first if it never was, or if the
+    sphere moved more than margin / 2 since, or a moving wall of its world drifted more than
+    margin / 2 in the rest frame (:func:`wall_drift`): together less than the margin, so every
+    triangle within r_i of the sphere is among the candidates). CANDIDATES_OVERFLOW: query the
+    BVHs. Capacity 0: always CANDIDATES_OVERFLOW, nothing kept."""
+    if candidates.capacity == 0:
+        return CANDIDATES_OVERFLOW
+    n = candidates.count[i]
+    half = 0.5 * candidates.margin
+    stale = int(0)
+    if n == CANDIDATES_UNSET:
+        stale = 1
+    else:
+        d = xi - candidates.x_built[i]
+        if wp.dot(d, d) > half * half:
+            stale = 1
+        elif wall_drift(candidates.t_built[i], t_now, ri, world, walls) > half:
+            stale = 1
+    if stale == 1:
+        n = gather_moving_wall_candidates(i, xi, ri, world, t_now, walls, candidates)
+    return n
 
 
 @functools.lru_cache(maxsize=None)
@@ -37,12 +125,83 @@ def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.F
     entry = entry_function(history_layout)  # compiled in: where slot s of sphere i lies
 
     @wp.func
+    def offer_wall_triangle(i: int, tri: int, mesh: wp.uint64, x_rest: wp.vec3, moving: int, rot: wp.quat,
+                            c_now: wp.vec3, c_rest: wp.vec3, ri: float, tag: int, n_new: int, step: StepInputs,
+                            contacts: ContactHistory, found: WallSlots) -> int:
+        """Offer triangle ``tri`` of wall ``tag`` to sphere i's wall contacts (``n_new`` slots so
+        far, returned updated): its closest point to the rest-frame centre ``x_rest``, if closer
+        than r_i, is merged with the contacts already collected (see
+        :func:`collect_sphere_wall_contacts`)."""
+        rows = contacts.count.shape[0]
+        max_contacts = contacts.slots
+        m = wp.mesh_get(mesh)
+        pa = m.points[m.indices[3 * tri + 0]]
+        pb = m.points[m.indices[3 * tri + 1]]
+        pc = m.points[m.indices[3 * tri + 2]]
+        cp = closest_point_triangle(x_rest, pa, pb, pc)
+        d = x_rest - cp
+        dist = wp.length(d)
+        if dist >= ri or dist < 1.0e-12:
+            return n_new
+        nrm = d / dist
+        if moving != 0:  # back to the world frame
+            nrm = wp.quat_rotate(rot, nrm)
+            cp = c_now + wp.quat_rotate(rot, cp - c_rest)
+        depth = ri - dist
+        keep = int(1)
+        tol = 1.0e-3 * ri
+        for s in range(n_new):
+            e = entry(i, s, rows, max_contacts)
+            tag_s = contacts.partner[e]
+            if tag_s == SLOT_EMPTY:
+                continue
+            n_s = contacts.wall_normal[e]
+            p_s = found.point[e]
+            d_s = found.depth[e]
+            related = int(0)
+            if wp.dot(n_s, nrm) > WALL_MERGE_COS:
+                related = 1
+            if d_s >= depth and wp.dot(cp - p_s, n_s) <= tol:
+                related = 1
+            if depth > d_s and wp.dot(p_s - cp, nrm) <= tol:
+                related = 1
+            if related == 1:
+                if d_s >= depth:
+                    keep = 0
+                else:
+                    contacts.partner[e] = SLOT_EMPTY
+        n_out = n_new
+        if keep == 1:
+            # reuse a slot emptied above (many triangles meeting at a vertex must not
+            # exhaust the slots with replaced candidates), else append
+            slot = n_new
+            for s in range(n_new):
+                if slot == n_new and contacts.partner[entry(i, s, rows, max_contacts)] == SLOT_EMPTY:
+                    slot = s
+            if slot < max_contacts:
+                e = entry(i, slot, rows, max_contacts)
+                contacts.partner[e] = tag
+                contacts.wall_normal[e] = nrm
+                found.depth[e] = depth
+                found.point[e] = cp
+                found.triangle[e] = tri
+                if slot == n_new:
+                    n_out = n_new + 1
+            else:
+                wp.atomic_add(step.overflow, 0, 1)
+        return n_out
+
+    @wp.func
     def collect_sphere_wall_contacts(i: int, spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
-                                     step: StepInputs, contacts: ContactHistory, found: WallSlots) -> int:
+                                     step: StepInputs, candidates: MovingWallCandidates,
+                                     contacts: ContactHistory, found: WallSlots) -> int:
         """The wall contacts of sphere i at the step's time; returns how many (slots 0 .. n - 1).
 
-        The closest feature of every triangle within the sphere's radius (rest-frame BVH query)
-        is a candidate. A candidate and a collected contact describe one contact if their normals
+        The closest feature of every triangle within the sphere's radius is a candidate: for a
+        static wall from a rest-frame BVH query (if the list build found the wall near), for a
+        moving wall from the sphere's kept candidates (:func:`moving_wall_candidates`; a BVH
+        query if they overflowed), in the same order either way. A candidate and a collected
+        contact describe one contact if their normals
         agree (cosine > WALL_MERGE_COS), or if the shallower one's contact point lies on (or
         behind) the deeper one's tangent plane: an edge/vertex of a neighbouring triangle touched
         "through" a face the sphere already presses on (coplanar or convex neighbours). The deeper
@@ -58,19 +217,22 @@ def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.F
         first_wall = walls.world_start[world]
         n_walls = walls.world_start[world + 1] - first_wall
         # most spheres of a bed are far from every static wall: decided without reading the sphere
-        any_wall = close_to_static_wall
+        n_moving = int(0)
         for kk in range(n_walls):
-            any_wall = any_wall + walls.moving[walls.world_index[first_wall + kk]]
-        if any_wall == 0 or step.world_paused[world] != 0:
+            n_moving = n_moving + walls.moving[walls.world_index[first_wall + kk]]
+        if close_to_static_wall + n_moving == 0 or step.world_paused[world] != 0:
             return 0
         me = spheres.view[i]
         if me.r < 0.0:
             return 0
-        rows = contacts.count.shape[0]
-        max_contacts = contacts.slots
         xi = me.x
         ri = me.r
         t_now = step.time[0]
+        n_kept_candidates = int(CANDIDATES_OVERFLOW)
+        if n_moving > 0:
+            n_kept_candidates = moving_wall_candidates(i, xi, ri, world, t_now, walls, candidates)
+        cap = candidates.capacity
+        cursor = int(0)
         n_new = int(0)
         for kk in range(n_walls):
             k = walls.world_index[first_wall + kk]
@@ -79,7 +241,6 @@ def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.F
                 continue
             mesh = walls.mesh[k]
             tag = -(k + 1)
-            ext = wp.vec3(ri, ri, ri)
             # the sphere in the wall's rest frame (static walls: the same point)
             rot = wp.quat_identity()
             c_now = wp.vec3(0.0)
@@ -89,64 +250,23 @@ def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.F
                 c_rest = walls.origin[k]
                 x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, walls.t_start[k], walls.t_stop[k], c_rest,
                                                               walls.lin_vel[k], walls.ang_vel[k])
-            mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
-            tri = int(0)
-            while wp.mesh_query_aabb_next(mquery, tri):
-                m = wp.mesh_get(mesh)
-                pa = m.points[m.indices[3 * tri + 0]]
-                pb = m.points[m.indices[3 * tri + 1]]
-                pc = m.points[m.indices[3 * tri + 2]]
-                cp = closest_point_triangle(x_rest, pa, pb, pc)
-                d = x_rest - cp
-                dist = wp.length(d)
-                if dist >= ri or dist < 1.0e-12:
-                    continue
-                nrm = d / dist
-                if moving != 0:  # back to the world frame
-                    nrm = wp.quat_rotate(rot, nrm)
-                    cp = c_now + wp.quat_rotate(rot, cp - c_rest)
-                depth = ri - dist
-                keep = int(1)
-                tol = 1.0e-3 * ri
-                for s in range(n_new):
-                    e = entry(i, s, rows, max_contacts)
-                    tag_s = contacts.partner[e]
-                    if tag_s == SLOT_EMPTY:
-                        continue
-                    n_s = contacts.wall_normal[e]
-                    p_s = found.point[e]
-                    d_s = found.depth[e]
-                    related = int(0)
-                    if wp.dot(n_s, nrm) > WALL_MERGE_COS:
-                        related = 1
-                    if d_s >= depth and wp.dot(cp - p_s, n_s) <= tol:
-                        related = 1
-                    if depth > d_s and wp.dot(p_s - cp, nrm) <= tol:
-                        related = 1
-                    if related == 1:
-                        if d_s >= depth:
-                            keep = 0
-                        else:
-                            contacts.partner[e] = SLOT_EMPTY
-                if keep == 1:
-                    # reuse a slot emptied above (many triangles meeting at a vertex must not
-                    # exhaust the slots with replaced candidates), else append
-                    slot = n_new
-                    for s in range(n_new):
-                        if slot == n_new and contacts.partner[entry(i, s, rows, max_contacts)] == SLOT_EMPTY:
-                            slot = s
-                    if slot < max_contacts:
-                        e = entry(i, slot, rows, max_contacts)
-                        contacts.partner[e] = tag
-                        contacts.wall_normal[e] = nrm
-                        found.depth[e] = depth
-                        found.point[e] = cp
-                        found.triangle[e] = tri
-                        if slot == n_new:
-                            n_new += 1
-                    else:
-                        wp.atomic_add(step.overflow, 0, 1)
+            if moving != 0 and n_kept_candidates >= 0:
+                while cursor < n_kept_candidates:
+                    if candidates.wall[i * cap + cursor] != k:
+                        break
+                    n_new = offer_wall_triangle(i, candidates.triangle[i * cap + cursor], mesh, x_rest, moving, rot,
+                                                c_now, c_rest, ri, tag, n_new, step, contacts, found)
+                    cursor += 1
+            else:
+                ext = wp.vec3(ri, ri, ri)
+                mquery = wp.mesh_query_aabb(mesh, x_rest - ext, x_rest + ext)
+                tri = int(0)
+                while wp.mesh_query_aabb_next(mquery, tri):
+                    n_new = offer_wall_triangle(i, tri, mesh, x_rest, moving, rot, c_now, c_rest, ri, tag, n_new,
+                                                step, contacts, found)
         # compact the slots (drop the ones replaced by deeper related contacts)
+        rows = contacts.count.shape[0]
+        max_contacts = contacts.slots
         n_kept = int(0)
         for s in range(n_new):
             e = entry(i, s, rows, max_contacts)
@@ -171,11 +291,12 @@ def collect_wall_contacts_kernel(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "
 
     @wp.kernel
     def collect_wall_contacts(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet, step: StepInputs,
-                              contacts: ContactHistory, found: WallSlots):
+                              candidates: MovingWallCandidates, contacts: ContactHistory, found: WallSlots):
         """Stage 1, one thread per sphere: :func:`collect_sphere_wall_contacts` of sphere i, its
         count into ``found.count`` (0 for spheres without wall contacts)."""
         i = wp.tid()
-        found.count[i] = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
+        found.count[i] = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, candidates, contacts,
+                                                      found)
 
     return collect_wall_contacts
 
@@ -314,13 +435,14 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
 
     @wp.kernel
     def collect_wall_contacts_and_forces(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
-                                         params: ContactParameters, step: StepInputs, history: ContactHistory,
+                                         params: ContactParameters, step: StepInputs,
+                                         candidates: MovingWallCandidates, history: ContactHistory,
                                          contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
                                          forces: SphereForces):
         """Stages 1 and 2 of sphere i in one thread (``wall_stage="fused"``): one launch, and the
         contacts just found are read back by the thread that wrote them."""
         i = wp.tid()
-        n_found = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, contacts, found)
+        n_found = collect_sphere_wall_contacts(i, spheres, neighbours, walls, step, candidates, contacts, found)
         found.count[i] = n_found  # the particle stage appends after these
         if n_found == 0:
             return
