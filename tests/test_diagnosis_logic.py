@@ -26,6 +26,7 @@ import re
 import shutil
 import subprocess
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -35,6 +36,7 @@ from calibration.designs import Parameter, ParameterSpace
 from validation import (CandidateEffect, DiagnosisSettings, EffectParameter, ErrorHistory, ForwardModel,
                         ForwardRunner, Misfit, Observable, Observations, ProposedMeasurement, diagnose, discriminate,
                         estimate_log_evidence, minimal_conflicts, pooled_noise_sd)
+from validation.diagnose import RankingRound, _break_tie
 from validation.search import evaluate_points
 
 NOISE_SD = {"static_angle": 0.5, "dynamic_angle": 0.5, "pile_angle": 0.8, "bulk_density": 6.0}
@@ -273,6 +275,29 @@ def test_tie_names_the_condition_that_separates(tie):
     assert f.means["shape"] - f.means["rolling_resistance"] > 2.0
     assert "drum angle at 60 rpm" in tie.next_steps[0] and "provisionally" in rnd.reason
     assert "provisional: particle shape fits as well" in tie.headline and "drum angle at 60 rpm" in tie.headline
+
+
+def _tied_candidate(name: str, log_bayes: float, z_dem) -> SimpleNamespace:
+    """What the tie-break reads of a CandidateResult: name, words, evidence and DEM residuals."""
+    return SimpleNamespace(name=name, effect=SimpleNamespace(words=name.replace("_", " ")), log_bayes=log_bayes,
+                           log_evidence=log_bayes, z=np.asarray(z_dem, dtype=float))
+
+
+@pytest.mark.parametrize("dem_gap, expected", [(45.0, "cohesion"), (1.5, "rolling_resistance")])
+def test_a_tie_is_broken_by_the_dem_at_the_best_fits_only_when_it_separates(dem_gap, expected):
+    """The paper-scale cohesion lab at the 20-minute settings (2026-11-27, H100): rolling resistance
+    ln B +16.7 and cohesion +16.4 tie, but the DEM at the best fits gives chi^2 53.2 and 8.4. A DEM
+    gap above 2 ln 3 picks the closer candidate; a smaller one leaves the evidence's order."""
+    top = _tied_candidate("rolling_resistance", 16.7, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, math.sqrt(8.4 + dem_gap)])
+    closer = _tied_candidate("cohesion", 16.4, [0.0, 0.0, 0.0, 0.0, 0.0, math.sqrt(8.4), np.nan])
+    rnd = RankingRound(None, (top, closer), ("rolling_resistance", "cohesion"), None, None, "")
+    chosen, reason = _break_tie(rnd, math.log(3.0))
+    assert chosen == expected
+    assert "provisionally" in reason and "DEM chi2 8.4" in reason
+    if expected == "cohesion":
+        assert "clearly closest" in reason
+    else:
+        assert "highest evidence" in reason
 
 
 def test_data_cannot_separate_is_said_not_guessed(tie):

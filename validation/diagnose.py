@@ -18,7 +18,9 @@
    augmented study, ranked by Bayes factor with signature and sentence (:mod:`validation.ranking`);
 3. if the top candidates are tied (ln B gap < ``tie_log_bayes``), the forward model's proposed
    conditions are forecast under each and the most separating one is named
-   (:mod:`validation.discrimination`);
+   (:mod:`validation.discrimination`); the one added (provisionally) is the top by evidence unless
+   the DEM at the tied candidates' best fits puts another clearly closer to the measurements
+   (:func:`_break_tie`);
 4. the chosen effect (the top candidate, or ``settings.add``) is recalibrated with a second
    design wave and confirmed by DEM, and with further waves (up to ``max_refine_waves``) while
    the DEM at the best fit disagrees with the surrogate there; the error history records every
@@ -355,6 +357,38 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     return RankingRound(current, ranked, tied, disc, None, "")
 
 
+def _confirmed_chi2(candidate: CandidateResult) -> float:
+    """chi^2 of a candidate's residuals where the DEM was run at its best fit (sum of z^2 over
+    the observables with a finite z; the surrogate's z where a run failed)."""
+    z = np.asarray(candidate.z, dtype=float)
+    return float(np.sum(z[np.isfinite(z)] ** 2))
+
+
+def _break_tie(rnd: RankingRound, tie_log_bayes: float) -> tuple[str, str]:
+    """The candidate to add when the evidence ties (``rnd.tied``), and why.
+
+    The Bayes factors come from the surrogates over the whole box and differ by less than their
+    resolution; what the tied candidates also have is a DEM run at each one's best fit (the
+    study's confirmation). A tied candidate whose DEM residuals there are smaller than the top
+    one's by more than 2 ``tie_log_bayes`` in chi^2 = sum z^2 (a Gaussian likelihood ratio beyond
+    the same threshold that makes a tie) is added instead: the simulator itself shows it closer to
+    the measurements. Otherwise the top candidate by evidence is added. Either way provisionally:
+    the discrimination still names the measurement that would decide."""
+    by_name = {c.name: c for c in rnd.candidates}
+    tied = [by_name[n] for n in rnd.tied]
+    top = tied[0]
+    chi2 = {c.name: _confirmed_chi2(c) for c in tied}
+    best = min(tied, key=lambda c: (chi2[c.name], -c.log_evidence))
+    pick = best if chi2[top.name] - chi2[best.name] > 2.0 * tie_log_bayes else top
+    others = [c for c in tied if c.name != pick.name]
+    listing = " and ".join(f"{c.effect.words} (ln B {c.log_bayes:+.1f}, DEM chi2 {chi2[c.name]:.1f})" for c in others)
+    why = ("the DEM at each one's best fit puts it clearly closest to the measurements" if pick is not top else
+           "it has the highest evidence and the DEM at the best fits does not separate them clearly")
+    reason = (f"{pick.effect.words} added provisionally (ln B {pick.log_bayes:+.1f}, DEM chi2 {chi2[pick.name]:.1f}): "
+              f"it ties on the evidence with {listing}; {why}")
+    return pick.name, reason
+
+
 def _check_inputs(observables, base_space, candidates, forward_model, settings) -> tuple[Observations, tuple]:
     if isinstance(observables, Observations):
         obs = observables
@@ -449,10 +483,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
                                     f"mention (best: {top.effect.words}, ln B = {top.log_bayes:+.1f} <= "
                                     f"{settings.tie_log_bayes:.2f}): the missing effect is not among the candidates")
         elif len(rnd.tied) >= 2:
-            chosen = top.name
-            words = {c.name: c.effect.words for c in rnd.candidates}
-            reason = (f"{top.effect.words} added provisionally: it ties with "
-                      f"{' and '.join(words[n] for n in rnd.tied if n != top.name)} on the present data")
+            chosen, reason = _break_tie(rnd, settings.tie_log_bayes)
         else:
             chosen, reason = top.name, f"{top.effect.words} has the highest evidence (ln B = {top.log_bayes:+.1f})"
         rnd = RankingRound(rnd.current, rnd.candidates, rnd.tied, rnd.discrimination, chosen, reason)
