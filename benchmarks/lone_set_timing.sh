@@ -28,7 +28,10 @@
 #      PYTHON (default python3), CHUNK_S (default 540), MIN_STEP_S (a step is not started with less
 #      left, default 60), SRC (default docs/results/hidden_effects_paper), EXPORT (a folder to copy
 #      the results to at the end of each call: chunks.jsonl, summary.json, logs.txt, the cache,
-#      diagnosis.json and dem_timing.json; 6 files).
+#      diagnosis.json and dem_timing.json; 6 files), SEED_CACHE (a DEM cache of an earlier run of the
+#      same settings, copied in at set-up: a re-diagnosis that re-runs only what that cache lacks, e.g.
+#      after a change to the statistics; NOT an empty-cache timing, and summary.json says
+#      "seeded_from").
 # On the device machine keep OUT in an ignored folder of the repository (e.g. results/lone_set) so
 # a warm machine keeps it between calls, and pass EXPORT=$OUT; if the machine went back, put the
 # exported files into that folder again and carry it.
@@ -81,6 +84,11 @@ print(f"lone_set_timing: set up {dst} (cache {doc['cache']}, designs_up_front: t
       f"replicated_fraction: {doc['diagnosis'].get('replicated_fraction', 1.0)}, "
       f"design_points_per_parameter: {doc['diagnosis'].get('design_points_per_parameter')})")
 EOF
+  if [ -n "${SEED_CACHE:-}" ]; then
+    [ -f "$SEED_CACHE" ] || { echo "lone_set_timing: SEED_CACHE $SEED_CACHE is not a file" >&2; exit 2; }
+    cat "$SEED_CACHE" > "$out/dem_cache.jsonl" && echo "$SEED_CACHE" > "$out/seeded_from"
+    echo "lone_set_timing: DEM cache seeded from $SEED_CACHE ($(wc -l < "$out/dem_cache.jsonl") runs): not an empty-cache timing"
+  fi
 fi
 
 left() { echo $(( chunk_s - ($(date +%s) - t0) )); }
@@ -140,6 +148,7 @@ summary = {
     "dem_launch_s": round(dem_all, 1), "dem_worlds": sum(x["worlds"] for x in launches),
     "launches": launches, "steps": steps,
     "designs_up_front": timing.get("designs_up_front") if timing else None,
+    "seeded_from": (out / "seeded_from").read_text().strip() if (out / "seeded_from").exists() else None,
 }
 if finished and last:
     # one uninterrupted run: every launch once + the statistics of the last (complete) diagnose step

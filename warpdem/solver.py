@@ -769,6 +769,9 @@ class Simulation:
         on_unstable = self.on_unstable if on_unstable is None else on_unstable
         if on_unstable not in UNSTABLE_MODES:
             raise ConfigError(f"on_unstable must be one of {UNSTABLE_MODES}, got {on_unstable!r}")
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+            raise ConfigError(f"run: steps must be a whole number of steps >= 0, got {steps!r} (for a duration in "
+                              f"seconds use round(duration / sim.dt))")
         failed: dict[int, str] = {}
         bar = None
         if progress:

@@ -239,6 +239,13 @@ def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.F
             moving = walls.moving[k]
             if moving == 0 and close_to_static_wall == 0:
                 continue
+            from_candidates = moving != 0 and n_kept_candidates >= 0
+            if from_candidates:
+                # none of this wall's triangles is near: nothing to place in its frame
+                if cursor >= n_kept_candidates:
+                    continue
+                if candidates.wall[i * cap + cursor] != k:
+                    continue
             mesh = walls.mesh[k]
             tag = -(k + 1)
             # the sphere in the wall's rest frame (static walls: the same point)
@@ -250,7 +257,7 @@ def wall_collection_function(history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.F
                 c_rest = walls.origin[k]
                 x_rest, rot, c_now = point_in_wall_rest_frame(xi, t_now, walls.t_start[k], walls.t_stop[k], c_rest,
                                                               walls.lin_vel[k], walls.ang_vel[k])
-            if moving != 0 and n_kept_candidates >= 0:
+            if from_candidates:
                 while cursor < n_kept_candidates:
                     if candidates.wall[i * cap + cursor] != k:
                         break
