@@ -3,12 +3,13 @@
     python benchmarks/step_cost.py --device cuda [--spheres 2000 20000 200000] [--worlds 1]
         [--neighbour-search cell_list|hash_grid] [--wall-stage split|fused]
         [--neighbour-layout sphere_major|slot_major] [--history-layout sphere_major|slot_major]
-        [--fused-placement]
+        [--fused-placement] [--wall-candidates 32|0] [--conditional-rebuild]
 
 A drum-like case per size: spheres d = 16-20 mm in drums of 0.3 m (one drum per world, each
 rotating at its own speed, as the diagnosis' drum designs are), about 950 spheres per drum,
-dt = 8.26e-5 s. For each total size: milliseconds per step with the CUDA graph
-(as the experiments run), without it, and a per-kernel breakdown of 50 ungraphed steps (Warp's
+dt = 8.26e-5 s. For each total size: milliseconds per step with the graph (as the experiments
+run: a CUDA graph on a GPU, Warp's CPU graph on the CPU), without it, and a per-kernel breakdown
+of 50 ungraphed steps (CUDA only; Warp's
 CUDA activity timing). One JSON line per size.
 """
 from __future__ import annotations
@@ -75,13 +76,16 @@ def main(argv=None):
     ap.add_argument("--device", default=None)
     ap.add_argument("--spheres", type=int, nargs="+", default=[2000, 20000, 200000])
     ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--conditional-rebuild", action="store_true",
+                    help="the list build behind a conditional graph node (CUDA; its early-exit launches skipped)")
     add_solver_options(ap)
     args = ap.parse_args(argv)
     quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     for n in args.spheres:
         model, worlds = drum_model(n, device)
-        sim = wd.Simulation(model, DT, force=True, **solver_options(args))
+        sim = wd.Simulation(model, DT, force=True, conditional_rebuild=args.conditional_rebuild,
+                            **solver_options(args))
         sim.run(2000, check_every=2000)  # let the lattice collapse first
         graph_ms = per_step_ms(sim, args.steps, device)
         sim.use_graph = False
@@ -89,6 +93,7 @@ def main(argv=None):
         kernels = kernel_breakdown(sim, 50) if wp.get_device(device).is_cuda else {}
         print(json.dumps(dict(case="drum-step-cost", device=wp.get_device(device).name, spheres=model.num_spheres,
                               worlds=worlds, **used_solver_options(sim.solver),
+                              conditional_rebuild=sim.solver.conditional_rebuild,
                               graph_ms_per_step=round(graph_ms, 4), plain_ms_per_step=round(plain_ms, 4),
                               sphere_steps_per_s=float(f"{model.num_spheres / (graph_ms * 1e-3):.3g}"),
                               list_builds=int(sim.solver.list_builds.numpy()[0]), kernels_ms_per_step=kernels,
