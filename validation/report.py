@@ -65,7 +65,8 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
         numbers += [(f"{final.name}: largest |z|", last.max_abs_z),
                     (f"{final.name}: χ² per observable", last.chi2_per_observable)]
     numbers += [("observables within 2σ (final)", f"{last.n_within} of {last.n_observables}"),
-                ("DEM runs", result.forward["runs"]), ("wall time (s)", round(result.seconds["total"], 1))]
+                ("DEM runs (set × fill, each in every experiment)", result.forward["runs"]),
+                ("wall time (s)", round(result.seconds["total"], 1))]
     verdict = Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers)
 
     # --- comparison
