@@ -936,7 +936,17 @@ def _material_label(res: Mapping[str, Any]) -> str:
 
 def summary_markdown(res: Mapping[str, Any]) -> str:
     """Short Markdown account of a campaign."""
-    lines = [f"# Calibration: {res['name']}", "", f"Parameters calibrated: {', '.join(res['parameters'])}; "
+    from .report_campaign import campaign_verdict
+
+    lines = [f"# Calibration: {res['name']}", ""]
+    try:
+        verdict, _ = campaign_verdict(res)
+    except ValueError:  # no confirmation runs: nothing to judge
+        verdict = None
+    if verdict is not None:
+        lines += [f"**{verdict.headline}**", ""]
+        lines += [f"- {d}" for d in verdict.details] + [""] if verdict.details else []
+    lines += [f"Parameters calibrated: {', '.join(res['parameters'])}; "
              f"fixed: {res['fixed']}; device: {res['device']}.", "",
              f"Contact law: {res['contact_law']}; material: {_material_label(res)}.", "", "## Targets", ""]
     for n, t in res["targets"].items():
@@ -1054,7 +1064,14 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
                 campaign.log(f"{resp.name}: {len(recs)} of {cfg.samples} samples done ({ok} ok)")
             campaign.log(f"part finished in {time.perf_counter() - t0:.1f} s; run again to continue")
             return 0
-        campaign.run(progress=not args.no_progress)
+        res = campaign.run(progress=not args.no_progress)
+        from .report_campaign import campaign_verdict
+
+        verdict, _ = campaign_verdict(_jsonable(res))
+        print(verdict.headline)  # the verdict first, then where the numbers and plots are
+        for line in verdict.details:
+            print(f"  - {line}")
+        print(f"report: {campaign.out / 'report.html'}  (summary: {campaign.out / 'summary.md'})")
         return 0
     except ConfigError as exc:  # e.g. records of another design in the output folder
         print(f"warpdem calibrate: {exc}", file=sys.stderr)

@@ -60,9 +60,10 @@ def _box_coverage(results: Mapping[str, Any]) -> dict[str, float]:
     return out
 
 
-def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Report:
-    """The :class:`~calibration.reporting.Report` of a campaign; figures are read from ``folder``."""
-    folder = Path(folder)
+def campaign_verdict(results: Mapping[str, Any]) -> tuple[Verdict, list[list]]:
+    """The verdict of a campaign (met when every confirmation run is within its tolerance; with the
+    warnings a reader needs: surrogates that predict nothing, an acceptable set spanning the box,
+    failed runs) and the confirmation table's rows. Shared by the HTML report and ``summary.md``."""
     conf = (results.get("confirmation") or {}).get("responses") or {}
     if not conf:
         raise ValueError("campaign report: results hold no confirmation runs ('confirmation' -> 'responses')")
@@ -101,7 +102,17 @@ def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Re
     if failed:
         warnings.append(f"{len(failed)} design run(s) failed and were left out of the surrogate.")
     details += warnings
-    verdict = Verdict(met, headline, details, numbers)
+    return Verdict(met, headline, details, numbers), rows
+
+
+def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Report:
+    """The :class:`~calibration.reporting.Report` of a campaign; figures are read from ``folder``."""
+    folder = Path(folder)
+    verdict, rows = campaign_verdict(results)
+    conf = results["confirmation"]["responses"]
+    held = (results.get("surrogate") or {}).get("held_out")
+    cover = _box_coverage(results)
+    met, warnings = verdict.met, verdict.details
 
     model = results.get("model") or {}
     material = model.get("material")

@@ -147,6 +147,25 @@ def test_interrupted_campaign_loses_nothing(tmp_path, fake_dem):
     assert sum(n for _, n in fake_dem) == len(lines) - 7
 
 
+def test_calibrate_command_prints_the_verdict_then_where_the_report_is(tmp_path, fake_dem, capsys):
+    """A finished `warpdem calibrate` ends with the verdict (and its warnings), then the report's
+    path; summary.md opens with the same verdict."""
+    import yaml
+
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump(BASE))
+    out = tmp_path / "out"
+    assert cp.calibrate_main([str(path), "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out.strip().splitlines()
+    done = max(i for i, line in enumerate(printed) if "done in" in line)  # the campaign's last log line
+    headline = printed[done + 1]
+    assert headline.startswith(("Calibration met", "Calibration not met"))
+    assert all(line.startswith("  - ") for line in printed[done + 2:-1])  # its warnings, if any
+    assert printed[-1].startswith("report: ") and "report.html" in printed[-1]
+    summary = (out / "summary.md").read_text().splitlines()
+    assert summary[2] == f"**{headline}**"
+
+
 def test_campaign_in_parts_from_the_command_line(tmp_path, fake_dem):
     """`warpdem calibrate CONFIG --max-samples N` runs N new samples per response and stops."""
     import yaml
