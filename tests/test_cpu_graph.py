@@ -55,3 +55,20 @@ def test_turning_on_the_external_force_after_a_graphed_run_takes_effect():
     # 0.5 N on a ~1.4 g sphere for 0.8 ms: about +0.3 m/s each, far beyond what the contacts add
     mass = sim.model.host["body_mass"]
     assert np.median(dv) == pytest.approx(np.median(0.5 / mass * 40 * 2e-5), rel=0.5)
+
+
+def test_a_replaced_state_is_stepped_not_the_captured_one():
+    """Code that gives the Simulation a new State (a checkpoint loaded into a fresh one) after a
+    graphed run: the graph is captured again for the new buffers, and the run goes on exactly as
+    if nothing had been replaced."""
+    graphed, stepped = drum(), drum(use_graph=False)
+    graphed.run(1000)
+    fresh = graphed.model.state()
+    graphed.solver.import_state(fresh, graphed.solver.export_state(graphed.state))
+    graphed.state = fresh
+    graphed.run(2000)
+    stepped.run(3000)
+    a, b = graphed.solver.export_state(graphed.state), stepped.solver.export_state(stepped.state)
+    assert int(b["contact_count"].sum()) > 0
+    for key, want in b.items():
+        assert np.array_equal(a[key], want), f"{key}: the run after replacing the State differs"

@@ -825,8 +825,10 @@ class Simulation:
             self._step_pair(n)
             self.steps += n
             return
-        if self._graph is not None and self._graph_epoch != self.solver.graph_epoch:
-            self._graph = None  # the solver changed what a step launches since the capture
+        if self._graph is not None and (self._graph_epoch != self.solver.graph_epoch
+                                        or {id(self.state), id(self._next)} != {id(s) for s in self._graph[1:]}):
+            # the solver changed what a step launches, or the States were replaced, since the capture
+            self._graph = None
         if self._graph is None:
             self._step_pair(2)  # warm-up: allocations happen outside the capture
             self.steps += 2
@@ -836,9 +838,9 @@ class Simulation:
                 for _ in range(self.steps_per_graph // 2):
                     self.solver.step(a, b)
                     self.solver.step(b, a)
-            self._graph = (cap.graph, a)
+            self._graph = (cap.graph, a, b)
             self._graph_epoch = self.solver.graph_epoch
-        graph, a = self._graph
+        graph, a, _ = self._graph
         if self.state is not a:  # keep parity with the captured buffers
             self._step_pair(1)
             self.steps += 1
