@@ -37,6 +37,7 @@ from validation import (CandidateEffect, DiagnosisSettings, EffectParameter, Err
                         ForwardRunner, Misfit, Observable, Observations, ProposedMeasurement, diagnose, discriminate,
                         estimate_log_evidence, minimal_conflicts, pooled_noise_sd)
 from validation.diagnose import RankingRound, _break_tie
+from validation.ranking import CandidateResult
 from validation.search import evaluate_points
 
 NOISE_SD = {"static_angle": 0.5, "dynamic_angle": 0.5, "pile_angle": 0.8, "bulk_density": 6.0}
@@ -279,8 +280,9 @@ def test_tie_names_the_condition_that_separates(tie):
 
 def _tied_candidate(name: str, log_bayes: float, z_dem) -> SimpleNamespace:
     """What the tie-break reads of a CandidateResult: name, words, evidence and DEM residuals."""
+    dem_chi2 = CandidateResult.dem_chi2.fget(SimpleNamespace(z=np.asarray(z_dem, dtype=float)))  # the real rule
     return SimpleNamespace(name=name, effect=SimpleNamespace(words=name.replace("_", " ")), log_bayes=log_bayes,
-                           log_evidence=log_bayes, z=np.asarray(z_dem, dtype=float))
+                           log_evidence=log_bayes, dem_chi2=dem_chi2)
 
 
 @pytest.mark.parametrize("dem_gap, expected", [(45.0, "cohesion"), (1.5, "rolling_resistance")])

@@ -357,13 +357,6 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     return RankingRound(current, ranked, tied, disc, None, "")
 
 
-def _confirmed_chi2(candidate: CandidateResult) -> float:
-    """chi^2 of a candidate's residuals where the DEM was run at its best fit (sum of z^2 over
-    the observables with a finite z; the surrogate's z where a run failed)."""
-    z = np.asarray(candidate.z, dtype=float)
-    return float(np.sum(z[np.isfinite(z)] ** 2))
-
-
 def _break_tie(rnd: RankingRound, tie_log_bayes: float) -> tuple[str, str]:
     """The candidate to add when the evidence ties (``rnd.tied``), and why.
 
@@ -377,7 +370,7 @@ def _break_tie(rnd: RankingRound, tie_log_bayes: float) -> tuple[str, str]:
     by_name = {c.name: c for c in rnd.candidates}
     tied = [by_name[n] for n in rnd.tied]
     top = tied[0]
-    chi2 = {c.name: _confirmed_chi2(c) for c in tied}
+    chi2 = {c.name: c.dem_chi2 for c in tied}
     best = min(tied, key=lambda c: (chi2[c.name], -c.log_evidence))
     pick = best if chi2[top.name] - chi2[best.name] > 2.0 * tie_log_bayes else top
     others = [c for c in tied if c.name != pick.name]

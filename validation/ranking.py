@@ -87,6 +87,12 @@ class CandidateResult:
         return np.where(np.isfinite(zc), zc, self.study.best.z)
 
     @property
+    def dem_chi2(self) -> float:
+        """chi^2 = sum z^2 of :attr:`z` over the observables with a finite z."""
+        z = self.z
+        return float(np.sum(z[np.isfinite(z)] ** 2))
+
+    @property
     def log_evidence(self) -> float:
         return self.study.evidence.log_evidence
 

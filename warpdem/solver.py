@@ -266,12 +266,13 @@ class DEMSolver:
         self.rebuild = wp.ones(1, dtype=int, device=d)
         self.nb_overflow = wp.zeros(2, dtype=int, device=d)  # [dropped, largest list needed]
         self.list_builds = wp.zeros(1, dtype=int, device=d)
+        self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
         self.wall_moving = wp.array([0 if w.motion.is_static else 1 for w in model.walls] or [0], dtype=int, device=d)
         self.wall_reach = wp.array([wall_reach(w) for w in model.walls] or [0.0], dtype=float, device=d)
         if isinstance(wall_candidates, bool) or not isinstance(wall_candidates, (int, np.integer)) or wall_candidates < 0:
             raise ConfigError(f"wall_candidates must be an integer >= 0 (slots per sphere), got {wall_candidates!r}")
         # slots only where a moving wall exists
-        self.wall_candidates = int(wall_candidates) if any(not w.motion.is_static for w in model.walls) else 0
+        self.wall_candidates = int(wall_candidates) if self.moving_walls else 0
         cand_rows = n if self.wall_candidates else 1
         self.candidate_count = wp.full(cand_rows, int(stages.CANDIDATES_UNSET), dtype=int, device=d)
         self.candidate_wall = wp.zeros(max(cand_rows * self.wall_candidates, 1), dtype=int, device=d)
@@ -280,7 +281,6 @@ class DEMSolver:
         self.candidate_t = wp.zeros(cand_rows, dtype=wp.float64, device=d)
         self.stages = stages.contact_stages(model.contact_law, neighbour_layout, history_layout)
         self.pack_contact_inputs()
-        self.moving_walls = [i for i, w in enumerate(model.walls) if not w.motion.is_static]
         # body-force models (warpdem.body_forces): launched after the contacts, summed into one
         # per-body force that the integrator adds (with the external force, if used)
         self.body_forces = tuple(getattr(model, "body_forces", ()))
@@ -561,7 +561,7 @@ class DEMSolver:
         self._packed_history: dict[int, tuple[tuple, stages.ContactHistory]] = {}
         self._packed_list_spheres: dict[int, tuple[tuple, tuple[float, float], kernels.ListSpheres]] = {}
         self._packed_step: dict[tuple, tuple[wp.array, stages.StepInputs]] = {}
-        self.graph_epoch = getattr(self, "graph_epoch", 0) + 1  # the launches now read other arrays
+        self.graph_epoch += 1  # the launches now read other arrays
 
     def _history(self, state: State) -> stages.ContactHistory:
         """The contact-history struct of ``state`` (packed once per State)."""
