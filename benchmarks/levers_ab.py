@@ -3,6 +3,11 @@ process per variant: the variants share the machine's state, and the order alter
 
     python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz
     python benchmarks/levers_ab.py --spheres 20000 --device cpu --load-state /tmp/bed20k.npz --steps 100
+    python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz --force-registers 48 64 96
+
+``--force-registers`` compares the default (the compiler's register choice) with register caps of the
+force kernels instead of the layout levers, and adds each variant's registers, spilled bytes and
+resident warps per SM of the two force kernels to its line.
 
 The settled bed of ``settled_bed.py --save-state`` is loaded into one Simulation per variant
 (default, each lever alone, all levers); then ``--rounds`` rounds of ``--steps`` steps each,
@@ -22,7 +27,7 @@ import warp as wp
 import warpdem as wd
 
 from settled_bed import build, load_settled_state  # noqa: E402  (run from benchmarks/)
-from warpdem.bench_settled_bed import LEVER_VARIANTS, quiet_warp, time_steps  # noqa: E402
+from warpdem.bench_settled_bed import LEVER_VARIANTS, force_kernel_resources, quiet_warp, time_steps  # noqa: E402
 
 VARIANTS = {**LEVER_VARIANTS, "default": {}}  # "default" is "auto" (all on a GPU, none on the CPU)
 
@@ -37,19 +42,24 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--rolling", default="epsd")
     ap.add_argument("--max-contacts", type=int, default=12)
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
+    ap.add_argument("--force-registers", type=int, nargs="+", default=None, metavar="CAP",
+                    help="compare register caps of the force kernels with the default instead of the layout levers")
     args = ap.parse_args(argv)
+    variants = VARIANTS
+    if args.force_registers:
+        variants = {"default": {}, **{f"force_registers_{c}": {"force_registers": c} for c in args.force_registers}}
     quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, args.max_contacts, args.order)
     sims = {}
-    for name, options in VARIANTS.items():
+    for name, options in variants.items():
         sim = wd.Simulation(model, 5.0e-5, steps_per_graph=50, **options)
         load_settled_state(args.load_state, sim)
         sim.run(2 * args.steps, check_every=2 * args.steps)  # compile, capture, first list build
         sims[name] = sim
-    times: dict[str, list[float]] = {name: [] for name in VARIANTS}
+    times: dict[str, list[float]] = {name: [] for name in variants}
     for r in range(args.rounds):
-        for name in (list(VARIANTS) if r % 2 == 0 else list(VARIANTS)[::-1]):
+        for name in (list(variants) if r % 2 == 0 else list(variants)[::-1]):
             times[name].append(time_steps(sims[name], device, 0, args.steps) / args.steps * 1e3)
     out = []
     for name, sim in sims.items():
@@ -59,7 +69,7 @@ def main(argv=None) -> list[dict]:
                    median_ms_per_step=round(float(np.median(t)), 4),
                    sphere_steps_per_s_best=float(f"{model.num_spheres / (t.min() * 1e-3):.4g}"),
                    ke_end_J=float(sim.kinetic_energy()[0]), list_builds=int(sim.solver.list_builds.numpy()[0]),
-                   date=time.strftime("%Y-%m-%d"))
+                   kernels=force_kernel_resources(sim.solver), date=time.strftime("%Y-%m-%d"))
         print(json.dumps(res), flush=True)
         out.append(res)
     return out

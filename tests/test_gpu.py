@@ -221,3 +221,39 @@ def test_cuda_layout_levers_match_the_default(name, lever, layout_kernels, monke
         not_bitwise.append(f"{key} (max |diff| {np.abs(got[key].astype(float) - w.astype(float)).max():.2g})")
     if not_bitwise:
         warnings.warn(f"{name}/{lever}: within tolerance but not bit for bit: {', '.join(not_bitwise)}")
+
+
+# ----------------------------------------------------------------------------- register cap
+# ``force_registers`` (warpdem.stages.launch) only changes how the CUDA compiler allocates registers
+# to the force kernels: the same instructions, so the same bodies, contacts and forces, bit for bit,
+# as the compiler's own choice (the "auto" levers on). The cap must also really be compiled in: the
+# capped kernel reports at most that many registers per thread.
+REGISTER_CAPS = [40, 64]
+
+
+@pytest.mark.parametrize("cap", REGISTER_CAPS)
+@pytest.mark.parametrize("name", ["drum", "clumps", "wear"])
+def test_cuda_register_cap_matches_the_default(name, cap, monkeypatch):
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_layout_levers import RUNS, run_with
+
+    from warpdem.bench_settled_bed import kernel_resources
+
+    key = ("auto", name)
+    if key not in _cuda_default:
+        _cuda_default[key] = run_with(RUNS[name], {}, "cuda", monkeypatch, use_graph=True)
+    want = _cuda_default[key]
+    got = run_with(RUNS[name], {"force_registers": cap}, "cuda", monkeypatch, use_graph=True)
+    assert int(want["contact_count"].sum()) > 0
+    for k, w in want.items():
+        if k.startswith("wear_"):  # unordered atomic adds
+            np.testing.assert_allclose(got[k], w, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{cap}/{k}")
+        else:
+            assert np.array_equal(got[k], w), f"{name}/{cap}/{k} differs from the compiler's own register choice"
+    from warpdem import stages
+
+    capped = stages.contact_stages(wd.ContactLaw(), "slot_major", "slot_major", cap).particle_forces
+    plain = stages.contact_stages(wd.ContactLaw(), "slot_major", "slot_major").particle_forces
+    res_capped, res_plain = kernel_resources(capped, "cuda"), kernel_resources(plain, "cuda")
+    assert res_capped is not None and res_plain is not None  # both loaded by the scenes' runs (default law)
+    assert res_capped["registers"] <= cap, res_capped

@@ -357,3 +357,19 @@ def test_fused_placement_places_again_after_every_change(pump_geometry):
     check("a body put back to its last pose by the instability check")
     so.step(sim.state, sim._next)  # the views are now _next's
     check("a step from a State whose spheres the views do not show")
+
+
+@pytest.mark.parametrize("bad", [8, 300, 64.0, True, "64"])
+def test_force_registers_rejects_what_is_not_a_register_count(bad):
+    model = SCENES["drum"]().model
+    with pytest.raises(wd.ConfigError, match="force_registers"):
+        wd.Simulation(model, 2e-5, force_registers=bad)
+
+
+def test_force_registers_changes_no_result_on_the_cpu(monkeypatch):
+    """The cap is a CUDA compile option: the CPU builds the same kernels (the CUDA comparison is
+    tests/test_gpu.py's ``test_cuda_register_cap_matches_the_default``)."""
+    want = default_cpu("drum")
+    got = run_with(RUNS["drum"], {**OFF, "force_registers": 48}, "cpu", monkeypatch)
+    for key, w in want.items():
+        assert np.array_equal(got[key], w), key

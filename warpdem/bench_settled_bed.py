@@ -58,6 +58,9 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--wall-candidates", type=int, default=DEFAULT_WALL_CANDIDATES,
                     help="slots per sphere for the moving walls' triangles it may touch, kept between "
                          f"gatherings (0: query the moving walls' BVHs every step; default {DEFAULT_WALL_CANDIDATES})")
+    ap.add_argument("--force-registers", type=int, default=None,
+                    help="CUDA register cap per thread of the wall- and particle-force kernels (default: the "
+                         "compiler's choice)")
 
 
 #: the solver's layout levers (benchmarks/levers_gpu.sh, levers_ab.py, tests/test_layout_levers.py): every
@@ -80,18 +83,62 @@ def quiet_warp() -> None:
         wp.config.log_level = wp.LOG_WARNING
 
 
+def kernel_resources(kernel: "wp.Kernel", device: str, block_dim: int = 256) -> dict | None:
+    """Registers per thread, local (spilled) bytes per thread and resident warps per SM of a CUDA
+    kernel already loaded on ``device`` (CUDA driver's ``cuFuncGetAttribute`` and
+    ``cuOccupancyMaxActiveBlocksPerMultiprocessor`` at ``block_dim`` threads per block, Warp's
+    default); None on the CPU or when the kernel is not loaded there."""
+    import ctypes
+
+    dev = wp.get_device(device)
+    if not dev.is_cuda:
+        return None
+    try:
+        forward = kernel.module.get_kernel_hooks(kernel, dev).forward
+    except RuntimeError:  # module not loaded on this device
+        return None
+    if not forward:
+        return None
+    cuda = ctypes.CDLL("libcuda.so.1")
+    fn = ctypes.c_void_p(forward)
+    out = {}
+    with wp.ScopedDevice(dev):
+        for name, attribute in (("registers", 4), ("local_bytes", 3), ("max_threads_per_block", 0)):
+            value = ctypes.c_int(0)
+            if cuda.cuFuncGetAttribute(ctypes.byref(value), ctypes.c_int(attribute), fn) != 0:
+                return None
+            out[name] = value.value
+        blocks = ctypes.c_int(0)
+        if cuda.cuOccupancyMaxActiveBlocksPerMultiprocessor(ctypes.byref(blocks), fn, ctypes.c_int(block_dim),
+                                                            ctypes.c_size_t(0)) == 0:
+            out["resident_warps_per_sm"] = blocks.value * block_dim // 32
+    return out
+
+
+def force_kernel_resources(solver: wd.DEMSolver) -> dict:
+    """:func:`kernel_resources` of the solver's wall- and particle-force kernels (empty on the CPU)."""
+    out = {}
+    for name in ("wall_forces", "particle_forces"):
+        res = kernel_resources(getattr(solver.stages, name), str(solver.model.device))
+        if res is not None:
+            out[name] = res
+    return out
+
+
 def used_solver_options(solver: wd.DEMSolver) -> dict:
     """The solver options a run actually used (``"auto"`` resolved), for its JSON line."""
     return dict(neighbour_search=solver.neighbour_search, wall_stage=solver.wall_stage,
                 neighbour_layout=solver.neighbour_layout, history_layout=solver.history_layout,
-                fused_placement=solver.fused_placement, wall_candidates=solver.wall_candidates)
+                fused_placement=solver.fused_placement, wall_candidates=solver.wall_candidates,
+                force_registers=solver.force_registers)
 
 
 def solver_options(args: argparse.Namespace) -> dict:
     """The :class:`warpdem.Simulation` keyword arguments of :func:`add_solver_options`'s flags."""
     return dict(neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
                 neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
-                fused_placement=args.fused_placement, wall_candidates=args.wall_candidates)
+                fused_placement=args.fused_placement, wall_candidates=args.wall_candidates,
+                force_registers=args.force_registers)
 
 
 

@@ -72,10 +72,11 @@ class PackedInputs:
 
 @functools.lru_cache(maxsize=None)
 def contact_stages(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
-                   history_layout: str = DEFAULT_SLOT_LAYOUT) -> ContactStages:
+                   history_layout: str = DEFAULT_SLOT_LAYOUT, max_registers: int | None = None) -> ContactStages:
     """The stage kernels of ``law`` for the layouts of the neighbour list and of the contact
-    slots (:mod:`warpdem.layouts`; built once per combination and cached)."""
-    walls = wall_stage_kernels(law, history_layout)
+    slots (:mod:`warpdem.layouts`) and the CUDA register cap of the force stages
+    (:mod:`.launch`; built once per combination and cached)."""
+    walls = wall_stage_kernels(law, history_layout, max_registers)
     return ContactStages(collect_wall_contacts_kernel(history_layout), walls.wall_forces,
-                         particle_forces_kernel(law, neighbour_layout, history_layout),
+                         particle_forces_kernel(law, neighbour_layout, history_layout, max_registers),
                          walls.collect_wall_contacts_and_forces)

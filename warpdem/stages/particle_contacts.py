@@ -10,6 +10,7 @@ from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
 from ..kernels import damping_mass_function, effective_shear_modulus, effective_youngs_modulus
 from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
+from .launch import force_kernel
 from .law import law_evaluator
 from .structs import ContactHistory, ContactParameters, NeighbourList, SphereForces, SphereSet, StepInputs, WallSlots
 
@@ -18,9 +19,11 @@ wp.set_module_options({"enable_backward": False, "fast_math": True})
 
 @functools.lru_cache(maxsize=None)
 def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
-                           history_layout: str = DEFAULT_SLOT_LAYOUT) -> "wp.Kernel":
-    """Stage 3 of one contact law (built and cached per law and layouts of the neighbour list and
-    the contact history, :mod:`warpdem.layouts`), one thread per sphere.
+                           history_layout: str = DEFAULT_SLOT_LAYOUT,
+                           max_registers: int | None = None) -> "wp.Kernel":
+    """Stage 3 of one contact law (built and cached per law, layouts of the neighbour list and
+    the contact history, :mod:`warpdem.layouts`, and CUDA register cap, :mod:`.launch`), one
+    thread per sphere.
 
     Full neighbour list (each pair is evaluated from both sides, so sphere i writes only its
     own row: no atomics, deterministic). For each neighbour j of another body within
@@ -40,7 +43,7 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
     nb_entry = entry_function(neighbour_layout)  # compiled in: where entry k of sphere i lies
     slot = entry_function(history_layout)
 
-    @wp.kernel
+    @force_kernel(max_registers)
     def particle_forces(spheres: SphereSet, neighbours: NeighbourList, params: ContactParameters, step: StepInputs,
                         history: ContactHistory, contacts: ContactHistory, found: WallSlots, forces: SphereForces):
         i = wp.tid()

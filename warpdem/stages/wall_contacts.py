@@ -29,6 +29,7 @@ from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, closest_point
                        damping_mass_function, effective_youngs_modulus, point_in_wall_rest_frame, wall_is_moving,
                        wall_motion_time, wall_point_velocity)
 from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
+from .launch import force_kernel
 from .law import law_evaluator
 from .structs import (CANDIDATES_OVERFLOW, CANDIDATES_UNSET, ContactHistory, ContactParameters, MovingWallCandidates,
                       NeighbourList, SphereForces, SphereSet, StepInputs, WallSet, WallSlots, WearAccumulators)
@@ -332,9 +333,11 @@ class WallStageKernels:
 
 
 @functools.lru_cache(maxsize=None)
-def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOUT) -> WallStageKernels:
-    """The wall-force kernels of one contact law (built and cached per law and layout of the
-    contact slots, :mod:`warpdem.layouts`), one thread per sphere.
+def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOUT,
+                       max_registers: int | None = None) -> WallStageKernels:
+    """The wall-force kernels of one contact law (built and cached per law, layout of the
+    contact slots, :mod:`warpdem.layouts`, and CUDA register cap, :mod:`.launch`), one thread
+    per sphere.
 
     Both call ``wall_forces_of_sphere`` (compiled per law): for each wall contact that stage 1
     found: last step's history of the same wall is taken if its normal agrees (cosine >
@@ -429,7 +432,7 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
         forces.force[i] = f_sum
         forces.torque[i] = t_sum
 
-    @wp.kernel
+    @force_kernel(max_registers)
     def wall_forces(spheres: SphereSet, walls: WallSet, params: ContactParameters, step: StepInputs,
                     history: ContactHistory, contacts: ContactHistory, found: WallSlots, wear: WearAccumulators,
                     forces: SphereForces):
@@ -440,7 +443,7 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
             return
         wall_forces_of_sphere(i, n_found, spheres, walls, params, step, history, contacts, found, wear, forces)
 
-    @wp.kernel
+    @force_kernel(max_registers)
     def collect_wall_contacts_and_forces(spheres: SphereSet, neighbours: NeighbourList, walls: WallSet,
                                          params: ContactParameters, step: StepInputs,
                                          candidates: MovingWallCandidates, history: ContactHistory,
