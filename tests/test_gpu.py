@@ -228,7 +228,7 @@ def test_cuda_layout_levers_match_the_default(name, lever, layout_kernels, monke
 # to the force kernels: the same instructions, so the same bodies, contacts and forces, bit for bit,
 # as the compiler's own choice (the "auto" levers on). The cap must also really be compiled in: the
 # capped kernel reports at most that many registers per thread.
-REGISTER_CAPS = [40, 64]
+REGISTER_CAPS = [40, 80]
 
 
 @pytest.mark.parametrize("cap", REGISTER_CAPS)
@@ -236,8 +236,6 @@ REGISTER_CAPS = [40, 64]
 def test_cuda_register_cap_matches_the_default(name, cap, monkeypatch):
     sys.path.insert(0, str(Path(__file__).parent))
     from test_layout_levers import RUNS, run_with
-
-    from warpdem.bench_settled_bed import kernel_resources
 
     key = ("auto", name)
     if key not in _cuda_default:
@@ -250,10 +248,21 @@ def test_cuda_register_cap_matches_the_default(name, cap, monkeypatch):
             np.testing.assert_allclose(got[k], w, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{cap}/{k}")
         else:
             assert np.array_equal(got[k], w), f"{name}/{cap}/{k} differs from the compiler's own register choice"
-    from warpdem import stages
 
-    capped = stages.contact_stages(wd.ContactLaw(), "slot_major", "slot_major", cap).particle_forces
-    plain = stages.contact_stages(wd.ContactLaw(), "slot_major", "slot_major").particle_forces
-    res_capped, res_plain = kernel_resources(capped, "cuda"), kernel_resources(plain, "cuda")
-    assert res_capped is not None and res_plain is not None  # both loaded by the scenes' runs (default law)
-    assert res_capped["registers"] <= cap, res_capped
+
+def test_cuda_register_cap_is_compiled_in(monkeypatch):
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_contact_stages import SCENES
+    from test_layout_levers import run_with
+
+    from warpdem.bench_settled_bed import kernel_resources
+
+    def scene():
+        sim = SCENES["drum"]()
+        sim.run(4)
+        return sim
+
+    sims = {cap: run_with(scene, {"force_registers": cap}, "cuda", monkeypatch, use_graph=True) for cap in (None, 40)}
+    used = {cap: kernel_resources(sim.solver.stages.particle_forces, "cuda") for cap, sim in sims.items()}
+    assert used[40] is not None and used[None] is not None, used
+    assert used[40]["registers"] <= 40 < used[None]["registers"], used
