@@ -5,8 +5,8 @@ process per variant: the variants share the machine's state, and the order alter
     python benchmarks/levers_ab.py --spheres 20000 --device cpu --load-state /tmp/bed20k.npz --steps 100
     python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz --force-registers 48 64 96
 
-``--force-registers`` compares the default (the compiler's register choice) with register caps of the
-force kernels instead of the layout levers, and adds each variant's registers, spilled bytes and
+``--force-registers`` compares the compiler's own register choice ("compiler") with register caps of
+the force kernels instead of the layout levers, and adds each variant's registers, spilled bytes and
 resident warps per SM of the two force kernels to its line.
 
 The settled bed of ``settled_bed.py --save-state`` is loaded into one Simulation per variant
@@ -47,7 +47,8 @@ def main(argv=None) -> list[dict]:
     args = ap.parse_args(argv)
     variants = VARIANTS
     if args.force_registers:
-        variants = {"default": {}, **{f"force_registers_{c}": {"force_registers": c} for c in args.force_registers}}
+        variants = {"compiler": {"force_registers": None},
+                    **{f"force_registers_{c}": {"force_registers": c} for c in args.force_registers}}
     quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, args.max_contacts, args.order)

@@ -40,6 +40,16 @@ D = 0.018
 R = D / 2
 
 
+def register_cap_flag(text: str) -> int | str | None:
+    """``--force-registers`` value: an integer, ``auto`` or ``none``."""
+    if text in ("auto", "none"):
+        return None if text == "none" else "auto"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"an integer, 'auto' or 'none', got {text!r}") from None
+
+
 def add_solver_options(ap: argparse.ArgumentParser) -> None:
     """The solver's performance options as command-line flags (shared by the engine benchmarks)."""
     ap.add_argument("--neighbour-search", default=DEFAULT_NEIGHBOUR_SEARCH, choices=list(NEIGHBOUR_SEARCHES),
@@ -58,9 +68,10 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--wall-candidates", type=int, default=DEFAULT_WALL_CANDIDATES,
                     help="slots per sphere for the moving walls' triangles it may touch, kept between "
                          f"gatherings (0: query the moving walls' BVHs every step; default {DEFAULT_WALL_CANDIDATES})")
-    ap.add_argument("--force-registers", type=int, default=None,
-                    help="CUDA register cap per thread of the wall- and particle-force kernels (default: the "
-                         "compiler's choice)")
+    ap.add_argument("--force-registers", type=register_cap_flag, default="auto",
+                    help="CUDA register cap per thread of the wall- and particle-force kernels: an integer, 'none' "
+                         "(the compiler's choice) or 'auto' (default: 80 for models of more than 2 x SMs x 512 "
+                         "spheres)")
 
 
 #: the solver's layout levers (benchmarks/levers_gpu.sh, levers_ab.py, tests/test_layout_levers.py): every
