@@ -211,3 +211,33 @@ def test_a_world_found_again_with_round_off_parameters_is_served_from_the_cache(
     assert not near(1e-6)
     assert not near(2e-11, model="another model")
     assert len((tmp_path / "c.jsonl").read_text().splitlines()) == 1  # an alias is not written again
+
+
+class CachedTieModel(CachedAnalyticModel):
+    """The cached superset model with shape built to mimic rolling resistance below 45 rpm (the tie
+    of test_diagnosis_logic) and the drum at 10 and 60 rpm to forecast."""
+
+    def __init__(self):
+        super().__init__()
+        from test_diagnosis_logic import DRUM_10, DRUM_60
+
+        self.analytic = AnalyticGranularModel(0, shape_like_rolling=True, proposals=(DRUM_10, DRUM_60))
+
+    def proposals(self):
+        return self.analytic.proposals()
+
+
+def test_the_tied_candidates_forecasts_share_one_launch():
+    """When candidates tie, their runs at the proposed conditions are requests of one merged call
+    (one launch per experiment on the GPU), not one launch per candidate."""
+    from test_diagnosis_logic import TRUTHS as T
+
+    obs = lab_observables(T["rolling_resistance"], ("rolling_resistance",), shape_like_rolling=True)
+    inner = CachedTieModel()
+    pool = PooledForward(inner)
+    result = diagnose(obs, BASE, [ROLLING, SHAPE], pool, FAST)
+    disc = result.rounds[0].discrimination
+    assert disc is not None and len(disc.candidates) == 2 and disc.forecasts
+    forecast_keys = {p.key for p in inner.proposals()}
+    merged = [m for m in pool.merges if m["keys"] == len(forecast_keys) and m["requests"] == 2]
+    assert merged, pool.merges  # both candidates' forecasts in one call

@@ -19,6 +19,7 @@ candidates and the diagnosis says so instead of guessing.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from itertools import combinations
 from typing import Mapping, Sequence
@@ -29,6 +30,7 @@ from calibration.designs import ParameterSpace
 
 from .design import DesignData, design_replicates, pooled_noise_sd
 from .forward import ForwardRunner, ProposedMeasurement
+from .pooled import run_as_workers
 from .study import ModelStudy
 from .surrogates import fit_surrogates
 
@@ -106,8 +108,11 @@ def discriminate(studies: Mapping[str, ModelStudy], labels: Mapping[str, str],
     dup = sorted({k for k in keys if keys.count(k) > 1})
     if dup:
         raise ValueError(f"proposed measurement keys must be unique; duplicated: {dup}")
-    pred = {n: _predictive(studies[n], keys, runner, replicates, n_posterior, seed, replicated_fraction)
-            for n in names}
+    # one task per candidate: with a pooled forward model (validation.pooled) their runs at the
+    # proposed conditions go into one launch per experiment instead of one per candidate
+    tasks = [functools.partial(_predictive, studies[n], keys, runner, replicates, n_posterior, seed, replicated_fraction)
+             for n in names]
+    pred = dict(zip(names, run_as_workers(getattr(runner, "model", None), tasks)))
     forecasts = []
     for c, p in enumerate(proposals):
         if p.expected_standard_error is not None:
