@@ -3,11 +3,12 @@ process per variant: the variants share the machine's state, and the order alter
 
     python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz
     python benchmarks/levers_ab.py --spheres 20000 --device cpu --load-state /tmp/bed20k.npz --steps 100
-    python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz --force-registers 48 64 96
+    python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz --compare force_registers none 64 80
+    python benchmarks/levers_ab.py --spheres 1000000 --device cuda --load-state /tmp/bed.npz --compare wear_lanes 1 32
 
-``--force-registers`` compares the compiler's own register choice ("compiler") with register caps of
-the force kernels instead of the layout levers, and adds each variant's registers, spilled bytes and
-resident warps per SM of the two force kernels to its line.
+``--compare OPTION VALUE...`` compares values of one Simulation option instead of the layout levers
+(``none`` is None; integers are integers). Every line also gives the registers, spilled bytes and
+resident warps per SM of the two force kernels.
 
 The settled bed of ``settled_bed.py --save-state`` is loaded into one Simulation per variant
 (default, each lever alone, all levers); then ``--rounds`` rounds of ``--steps`` steps each,
@@ -32,6 +33,16 @@ from warpdem.bench_settled_bed import LEVER_VARIANTS, force_kernel_resources, qu
 VARIANTS = {**LEVER_VARIANTS, "default": {}}  # "default" is "auto" (all on a GPU, none on the CPU)
 
 
+def option_value(text: str):
+    """A ``--compare`` value: ``none`` -> None, an integer -> int, else the text."""
+    if text == "none":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        return text
+
+
 def main(argv=None) -> list[dict]:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--spheres", type=int, default=20000)
@@ -42,13 +53,15 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--rolling", default="epsd")
     ap.add_argument("--max-contacts", type=int, default=12)
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"])
-    ap.add_argument("--force-registers", type=int, nargs="+", default=None, metavar="CAP",
-                    help="compare register caps of the force kernels with the default instead of the layout levers")
+    ap.add_argument("--compare", nargs="+", default=None, metavar="OPTION VALUE",
+                    help="one Simulation option and its values to compare (instead of the layout levers)")
     args = ap.parse_args(argv)
     variants = VARIANTS
-    if args.force_registers:
-        variants = {"compiler": {"force_registers": None},
-                    **{f"force_registers_{c}": {"force_registers": c} for c in args.force_registers}}
+    if args.compare:
+        if len(args.compare) < 2:
+            ap.error("--compare needs an option and at least one value")
+        option, values = args.compare[0], [option_value(v) for v in args.compare[1:]]
+        variants = {f"{option}_{v}": {option: v} for v in values}
     quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     model, _ = build(args.spheres, 1, args.rolling, device, args.max_contacts, args.order)

@@ -266,3 +266,20 @@ def test_cuda_register_cap_is_compiled_in(monkeypatch):
     used = {cap: kernel_resources(sim.solver.stages.particle_forces, "cuda") for cap, sim in sims.items()}
     assert used[40] is not None and used[None] is not None, used
     assert used[40]["registers"] <= 40 < used[None]["registers"], used
+
+
+# ----------------------------------------------------------------------------- wear lanes
+@pytest.mark.parametrize("name", ["wear", "drum"])
+def test_cuda_wear_lanes_change_no_force(name, monkeypatch):
+    """The GPU default (32 copies of the wall accumulators) against one copy: bodies, contacts and
+    forces bit for bit, wear to float rounding (tests/test_wear_lanes.py on the CPU)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_layout_levers import RUNS, run_with
+
+    one = run_with(RUNS[name], {"wear_lanes": 1}, "cuda", monkeypatch, use_graph=True)
+    auto = run_with(RUNS[name], {}, "cuda", monkeypatch, use_graph=True)
+    for k, w in one.items():
+        if k.startswith("wear_"):
+            np.testing.assert_allclose(auto[k], w, rtol=1e-5, atol=1e-12, err_msg=f"{name}/{k}")
+        else:
+            assert np.array_equal(auto[k], w), f"{name}/{k}"

@@ -72,6 +72,8 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                     help="CUDA register cap per thread of the wall- and particle-force kernels: an integer, 'none' "
                          "(the compiler's choice) or 'auto' (default: 80 for models of more than 2 x SMs x 512 "
                          "spheres)")
+    ap.add_argument("--wear-lanes", type=lambda t: t if t == "auto" else int(t), default="auto",
+                    help="copies of the wall wear accumulators (default auto: 32 on a GPU, 1 on the CPU)")
 
 
 #: the solver's layout levers (benchmarks/levers_gpu.sh, levers_ab.py, tests/test_layout_levers.py): every
@@ -141,7 +143,7 @@ def used_solver_options(solver: wd.DEMSolver) -> dict:
     return dict(neighbour_search=solver.neighbour_search, wall_stage=solver.wall_stage,
                 neighbour_layout=solver.neighbour_layout, history_layout=solver.history_layout,
                 fused_placement=solver.fused_placement, wall_candidates=solver.wall_candidates,
-                force_registers=solver.force_registers)
+                force_registers=solver.force_registers, wear_lanes=solver.wall_stats.lanes)
 
 
 def solver_options(args: argparse.Namespace) -> dict:
@@ -149,7 +151,7 @@ def solver_options(args: argparse.Namespace) -> dict:
     return dict(neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
                 neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
                 fused_placement=args.fused_placement, wall_candidates=args.wall_candidates,
-                force_registers=args.force_registers)
+                force_registers=args.force_registers, wear_lanes=args.wear_lanes)
 
 
 

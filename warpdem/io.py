@@ -180,8 +180,8 @@ def save_checkpoint(path: str | os.PathLike, sim) -> Path:
     arrays.update({f"initial/{k}": v for k, v in m.initial.items()})
     # contact slots in the default layout whatever the solver's history_layout (loadable by any solver)
     arrays.update({f"state/{k}": v for k, v in sim.solver.export_state(sim.state).items()})
-    for f in sim.solver.wall_stats.FIELDS:
-        arrays[f"wear/{f}"] = getattr(sim.solver.wall_stats, f).numpy()
+    for f, lanes in sim.solver.wall_stats.export_lanes().items():
+        arrays[f"wear/{f}"] = lanes  # (lanes, entries): a solver with as many copies continues bit for bit
     for i, w in enumerate(m.walls):
         arrays[f"wall{i}/vertices"] = w.vertices
         arrays[f"wall{i}/faces"] = w.faces
@@ -237,7 +237,7 @@ def _load_checkpoint(path: Path, data, device: str | None, model: Model | None, 
     sim.solver.import_state(sim.state, state, fingerprint=fp)  # into the solver's slot layout
     sim.solver.import_state(sim._next, state, fingerprint=fp)
     for f in sim.solver.wall_stats.FIELDS:
-        getattr(sim.solver.wall_stats, f).assign(data[f"wear/{f}"])
+        sim.solver.wall_stats.load(f, data[f"wear/{f}"])
     sim.steps = int(meta["steps"])
     return sim
 

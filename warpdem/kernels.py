@@ -774,3 +774,14 @@ def kinetic_energy(
     wb = wp.quat_rotate_inv(rot[b], w[b])
     e = 0.5 * body_mass[b] * wp.dot(v[b], v[b]) + 0.5 * wp.dot(wb, wp.cw_mul(body_inertia[b], wb))
     wp.atomic_add(ke_world, body_world[b], e)
+
+
+@wp.kernel
+def sum_wear_lanes(lanes: wp.array(dtype=float), num_lanes: int, entries: int, out: wp.array(dtype=float)):
+    """out[e] = sum over k of lanes[k * entries + e], k = 0 .. num_lanes - 1 in order (the wall
+    accumulators' copies, :class:`warpdem.solver.WallStats`)."""
+    e = wp.tid()
+    total = float(0.0)
+    for k in range(num_lanes):
+        total = total + lanes[k * entries + e]
+    out[e] = total

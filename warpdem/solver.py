@@ -74,25 +74,92 @@ def resolve_performance_options(on_gpu: bool, neighbour_layout: str = "auto", hi
 HISTORY_ARRAYS = ("contact_partner", "contact_spring", "contact_roll", "contact_wnormal")
 
 
+#: copies of the wall accumulators on a GPU (``WallStats(lanes="auto")``) and the most entries per
+#: field they may take together
+WEAR_LANES = 32
+WEAR_LANE_BUDGET = 1 << 21
+
+
+def wear_lane_count(lanes: int | str, entries: int, on_gpu: bool) -> int:
+    """Copies of the wall accumulators: ``"auto"``: :data:`WEAR_LANES` (halved until ``entries``
+    times it fits in :data:`WEAR_LANE_BUDGET`) on a GPU, 1 on the CPU; an explicit power of two in
+    1..64 passes through."""
+    if lanes == "auto":
+        if not on_gpu:
+            return 1
+        k = WEAR_LANES
+        while k > 1 and entries * k > WEAR_LANE_BUDGET:
+            k //= 2
+        return k
+    if isinstance(lanes, bool) or not isinstance(lanes, (int, np.integer)) or not 1 <= lanes <= 64 \
+            or lanes & (lanes - 1):
+        raise ConfigError(f"wear_lanes must be 'auto' or a power of two in 1..64, got {lanes!r}")
+    return int(lanes)
+
+
 class WallStats:
     """Per-triangle, per-world wall accumulators (relative wear model).
 
     ``energy_n``/``energy_t``: accumulated normal / tangential contact energy
     sum |F_n . v_n| dt, sum |F_t . v_t| dt [J]; ``impulse_n``/``impulse_t``: sum |F| dt [N s].
     Arrays have shape (num_worlds * total_triangles,), index = world * T + triangle.
+
+    The wall stage adds into ``lanes`` copies of every entry (sphere i into copy i % lanes), so
+    that the thousands of spheres resting on one floor triangle do not queue their atomic adds on
+    one address; reading a field sums the copies in a fixed order (one small launch). ``lanes``:
+    ``"auto"`` gives :data:`WEAR_LANES` copies on a GPU where they fit in
+    :data:`WEAR_LANE_BUDGET` entries per field, 1 otherwise and on the CPU (one thread: nothing
+    queues), or an explicit count (a power of two, 1-64).
     """
 
     FIELDS = ("energy_n", "energy_t", "impulse_n", "impulse_t")
 
-    def __init__(self, model: Model) -> None:
-        n = max(model.num_worlds * model.total_triangles, 1)
-        for f in self.FIELDS:
-            setattr(self, f, wp.zeros(n, dtype=float, device=model.device))
+    def __init__(self, model: Model, lanes: int | str = "auto") -> None:
         self.model = model
+        self.entries = max(model.num_worlds * model.total_triangles, 1)
+        self.lanes = wear_lane_count(lanes, self.entries, model.device.is_cuda)
+        self._lane_arrays = {f: wp.zeros(self.entries * self.lanes, dtype=float, device=model.device)
+                             for f in self.FIELDS}
+
+    def lane_array(self, field: str) -> wp.array:
+        """The accumulator copies of one field (``lanes * entries``; what the wall stage adds into)."""
+        return self._lane_arrays[field]
+
+    def field(self, field: str) -> wp.array:
+        """One accumulator, the copies summed: shape (num_worlds * total_triangles,)."""
+        lanes = self._lane_arrays[field]
+        if self.lanes == 1:
+            return lanes
+        out = wp.empty(self.entries, dtype=float, device=self.model.device)
+        wp.launch(kernels.sum_wear_lanes, dim=self.entries, inputs=[lanes, self.lanes, self.entries, out],
+                  device=self.model.device)
+        return out
+
+    energy_n = property(lambda self: self.field("energy_n"))
+    energy_t = property(lambda self: self.field("energy_t"))
+    impulse_n = property(lambda self: self.field("impulse_n"))
+    impulse_t = property(lambda self: self.field("impulse_t"))
 
     def zero(self) -> None:
-        for f in self.FIELDS:
-            getattr(self, f).zero_()
+        for a in self._lane_arrays.values():
+            a.zero_()
+
+    def export_lanes(self) -> dict[str, np.ndarray]:
+        """Every copy of every field, shape (lanes, entries) (for a checkpoint)."""
+        return {f: a.numpy().reshape(self.lanes, self.entries) for f, a in self._lane_arrays.items()}
+
+    def load(self, field: str, values: np.ndarray) -> None:
+        """Set one field: ``values`` of shape (entries,) (into the first copy, the others zeroed) or
+        (lanes, entries) as :meth:`export_lanes` gave them (copied as they are)."""
+        values = np.asarray(values, dtype=np.float32)
+        if values.shape == (self.lanes, self.entries):
+            self._lane_arrays[field].assign(values.reshape(-1))
+            return
+        if values.shape[-1:] != (self.entries,):
+            raise ConfigError(f"wall accumulator {field}: {values.shape} values for {self.entries} entries")
+        full = np.zeros((self.lanes, self.entries), dtype=np.float32)
+        full[0] = values.reshape(-1, self.entries).sum(axis=0)
+        self._lane_arrays[field].assign(full.reshape(-1))
 
     def per_triangle(self, field: str, wall: int | None = None) -> np.ndarray:
         """(num_worlds, T_wall) array of one accumulator, for one wall or all walls."""
@@ -189,6 +256,9 @@ class DEMSolver:
             24..255, ``None`` (the compiler's choice) or ``"auto"`` (the default: 80 on a GPU for
             models of more than 2 x SMs x 512 spheres, 135k on an H100; a 1e6-sphere bed +7.4 %,
             small models unchanged). Ignored on the CPU. Same results, bit for bit.
+        wear_lanes: copies of the wall accumulators (:class:`WallStats`): ``"auto"`` (32 on a GPU
+            where they fit, 1 on the CPU) or a power of two in 1..64. The forces do not depend on it;
+            the accumulated wear only to float rounding (atomic adds are unordered on a GPU anyway).
     """
 
     def __init__(self, model: Model, dt: float, v_ref: float = 2.0, force: bool = False,
@@ -197,7 +267,8 @@ class DEMSolver:
                  neighbour_search: str = DEFAULT_NEIGHBOUR_SEARCH, wall_stage: str = DEFAULT_WALL_STAGE,
                  neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT, history_layout: str = DEFAULT_HISTORY_LAYOUT,
                  fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT,
-                 wall_candidates: int = DEFAULT_WALL_CANDIDATES, force_registers: int | str | None = "auto") -> None:
+                 wall_candidates: int = DEFAULT_WALL_CANDIDATES, force_registers: int | str | None = "auto",
+                 wear_lanes: int | str = "auto") -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
         if neighbour_search not in NEIGHBOUR_SEARCHES:
@@ -236,7 +307,7 @@ class DEMSolver:
         # bumped by every change that alters what a step launches (a captured graph is then stale)
         self.graph_epoch = 0
         self._use_external_force = False
-        self.wall_stats = WallStats(model)
+        self.wall_stats = WallStats(model, wear_lanes)
         self.skin = 0.3 * model.max_radius if neighbour_skin is None else float(neighbour_skin)
         if not self.skin > 0:
             raise ConfigError(f"neighbour_skin must be > 0 m, got {neighbour_skin}")
@@ -546,9 +617,10 @@ class DEMSolver:
         found.triangle = self.slot_tri
         wear = stages.WearAccumulators()
         ws = self.wall_stats
-        wear.energy_n, wear.energy_t = ws.energy_n, ws.energy_t
-        wear.impulse_n, wear.impulse_t = ws.impulse_n, ws.impulse_t
+        wear.energy_n, wear.energy_t = ws.lane_array("energy_n"), ws.lane_array("energy_t")
+        wear.impulse_n, wear.impulse_t = ws.lane_array("impulse_n"), ws.lane_array("impulse_t")
         wear.triangles_per_world = m.total_triangles
+        wear.entries, wear.lanes = ws.entries, ws.lanes
         forces = stages.SphereForces()
         forces.force = self.sphere_f
         forces.torque = self.sphere_t
@@ -740,7 +812,8 @@ class Simulation:
                  wall_stage: str = DEFAULT_WALL_STAGE, neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT,
                  history_layout: str = DEFAULT_HISTORY_LAYOUT,
                  fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT,
-                 wall_candidates: int = DEFAULT_WALL_CANDIDATES, force_registers: int | str | None = "auto") -> None:
+                 wall_candidates: int = DEFAULT_WALL_CANDIDATES, force_registers: int | str | None = "auto",
+                 wear_lanes: int | str = "auto") -> None:
         self.model = model
         # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
         # "freeze" (the world stays frozen and is listed, the others run on)
@@ -750,7 +823,7 @@ class Simulation:
                                 v_max=v_max, neighbour_search=neighbour_search, wall_stage=wall_stage,
                                 neighbour_layout=neighbour_layout, history_layout=history_layout,
                                 fused_placement=fused_placement, wall_candidates=wall_candidates,
-                                force_registers=force_registers)
+                                force_registers=force_registers, wear_lanes=wear_lanes)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0

@@ -102,13 +102,18 @@ class MovingWallCandidates:
 @wp.struct
 class WearAccumulators:
     """Per-world, per-triangle wall accumulators (relative wear model, ``DEMSolver.wall_stats``);
-    entry ``world * triangles_per_world + tri_offset[wall] + triangle``."""
+    entry ``world * triangles_per_world + tri_offset[wall] + triangle``, held in ``lanes`` copies
+    (lane ``i % lanes`` of sphere i at ``lane * entries + entry``: many spheres on one floor
+    triangle then spread their atomic adds over several addresses; :class:`warpdem.solver.WallStats`
+    sums the lanes when read)."""
 
     energy_n: wp.array(dtype=float)  # sum |F_n v_n| dt [J]
     energy_t: wp.array(dtype=float)  # sum |F_t . v_t| dt [J]
     impulse_n: wp.array(dtype=float)  # sum |F_n| dt [N s]
     impulse_t: wp.array(dtype=float)  # sum |F_t| dt [N s]
     triangles_per_world: int  # all walls' triangles (``Model.total_triangles``)
+    entries: int  # entries of one lane (num_worlds * triangles_per_world)
+    lanes: int  # copies of every entry (1: none)
 
 
 @wp.struct
