@@ -234,6 +234,7 @@ REGISTER_CAPS = [40, 80]
 @pytest.mark.parametrize("cap", REGISTER_CAPS)
 @pytest.mark.parametrize("name", ["drum", "clumps", "wear"])
 def test_cuda_register_cap_matches_the_default(name, cap, monkeypatch):
+    needs_cuda()
     sys.path.insert(0, str(Path(__file__).parent))
     from test_layout_levers import RUNS, run_with
 
@@ -251,6 +252,7 @@ def test_cuda_register_cap_matches_the_default(name, cap, monkeypatch):
 
 
 def test_cuda_register_cap_is_compiled_in(monkeypatch):
+    needs_cuda()
     sys.path.insert(0, str(Path(__file__).parent))
     from test_contact_stages import SCENES
     from test_layout_levers import run_with
@@ -273,6 +275,7 @@ def test_cuda_register_cap_is_compiled_in(monkeypatch):
 def test_cuda_wear_lanes_change_no_force(name, monkeypatch):
     """The GPU default (32 copies of the wall accumulators) against one copy: bodies, contacts and
     forces bit for bit, wear to float rounding (tests/test_wear_lanes.py on the CPU)."""
+    needs_cuda()
     sys.path.insert(0, str(Path(__file__).parent))
     from test_layout_levers import RUNS, run_with
 
