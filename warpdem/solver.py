@@ -125,9 +125,9 @@ class WallStats:
         """The accumulator copies of one field (``lanes * entries``; what the wall stage adds into)."""
         return self._lane_arrays[field]
 
-    def field(self, field: str) -> wp.array:
-        """One accumulator, the copies summed: shape (num_worlds * total_triangles,)."""
-        lanes = self._lane_arrays[field]
+    def summed(self, name: str) -> wp.array:
+        """One accumulator (``name`` in :attr:`FIELDS`), the copies summed: shape (num_worlds * total_triangles,)."""
+        lanes = self._lane_arrays[name]
         if self.lanes == 1:
             return lanes
         out = wp.empty(self.entries, dtype=float, device=self.model.device)
@@ -135,10 +135,10 @@ class WallStats:
                   device=self.model.device)
         return out
 
-    energy_n = property(lambda self: self.field("energy_n"))
-    energy_t = property(lambda self: self.field("energy_t"))
-    impulse_n = property(lambda self: self.field("impulse_n"))
-    impulse_t = property(lambda self: self.field("impulse_t"))
+    energy_n = property(lambda self: self.summed("energy_n"))
+    energy_t = property(lambda self: self.summed("energy_t"))
+    impulse_n = property(lambda self: self.summed("impulse_n"))
+    impulse_t = property(lambda self: self.summed("impulse_t"))
 
     def zero(self) -> None:
         for a in self._lane_arrays.values():
