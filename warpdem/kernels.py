@@ -176,25 +176,33 @@ class MemberPlacement:
     request: wp.array(dtype=int)  # [0] != 0: the views are stale, the next step places them all
 
 
+@wp.struct
+class BodyStates:
+    """The bodies of one State: what the integrator reads (``in``) or writes (``out``) and the
+    placement reads (:meth:`warpdem.model.State` arrays of the same names)."""
+
+    active: wp.array(dtype=int)  # 1 active, 0 removed
+    q: wp.array(dtype=wp.vec3)  # centre of mass [m]
+    rot: wp.array(dtype=wp.quat)  # orientation (body to world)
+    v: wp.array(dtype=wp.vec3)  # velocity [m/s]
+    w: wp.array(dtype=wp.vec3)  # angular velocity [rad/s]
+
+
 @wp.func
-def place_sphere(i: int, members: MemberPlacement, body_q: wp.array(dtype=wp.vec3), body_rot: wp.array(dtype=wp.quat),
-                 body_v: wp.array(dtype=wp.vec3), body_w: wp.array(dtype=wp.vec3), body_active: wp.array(dtype=int),
-                 sphere_x: wp.array(dtype=wp.vec3)):
+def place_sphere(i: int, members: MemberPlacement, bodies: BodyStates, sphere_x: wp.array(dtype=wp.vec3)):
     """Sphere i's position from its body's pose, and its packed :class:`SphereView`."""
     b = members.body[i]
-    xb = body_q[b]
-    x = xb + wp.quat_rotate(body_rot[b], members.offset[i])
+    xb = bodies.q[b]
+    x = xb + wp.quat_rotate(bodies.rot[b], members.offset[i])
     sphere_x[i] = x
-    members.views[i] = sphere_view(x, members.radius[i], members.material[i], xb, body_v[b], body_w[b],
-                                   members.mass[b], members.inertia[b], body_active[b])
+    members.views[i] = sphere_view(x, members.radius[i], members.material[i], xb, bodies.v[b], bodies.w[b],
+                                   members.mass[b], members.inertia[b], bodies.active[b])
 
 
 @wp.kernel
-def place_sphere_views(members: MemberPlacement, body_q: wp.array(dtype=wp.vec3), body_rot: wp.array(dtype=wp.quat),
-                       body_v: wp.array(dtype=wp.vec3), body_w: wp.array(dtype=wp.vec3),
-                       body_active: wp.array(dtype=int), sphere_x: wp.array(dtype=wp.vec3)):
+def place_sphere_views(members: MemberPlacement, bodies: BodyStates, sphere_x: wp.array(dtype=wp.vec3)):
     """Sphere positions from body poses, and each sphere's packed :class:`SphereView`."""
-    place_sphere(wp.tid(), members, body_q, body_rot, body_v, body_w, body_active, sphere_x)
+    place_sphere(wp.tid(), members, bodies, sphere_x)
 
 
 # threads of the grid-stride placement launch of ``fused_placement`` (an early exit on most steps)
@@ -203,10 +211,7 @@ MAX_PLACEMENT_THREADS = 1 << 16
 
 @wp.kernel
 def place_sphere_views_on_request(rebuild: wp.array(dtype=int), num_spheres: int, stride: int,
-                                  members: MemberPlacement, body_q: wp.array(dtype=wp.vec3),
-                                  body_rot: wp.array(dtype=wp.quat), body_v: wp.array(dtype=wp.vec3),
-                                  body_w: wp.array(dtype=wp.vec3), body_active: wp.array(dtype=int),
-                                  sphere_x: wp.array(dtype=wp.vec3)):
+                                  members: MemberPlacement, bodies: BodyStates, sphere_x: wp.array(dtype=wp.vec3)):
     """:func:`place_sphere_views` (grid-stride, ``stride`` = the launch's thread count) only if
     ``members.request[0]`` (the views are not this State's: first step, a State changed between
     steps) or ``rebuild[0]`` (a list rebuild asked for before the step: bodies were added, moved or
@@ -215,7 +220,7 @@ def place_sphere_views_on_request(rebuild: wp.array(dtype=int), num_spheres: int
     if members.request[0] == 0 and rebuild[0] == 0:
         return
     for i in range(wp.tid(), num_spheres, stride):
-        place_sphere(i, members, body_q, body_rot, body_v, body_w, body_active, sphere_x)
+        place_sphere(i, members, bodies, sphere_x)
 
 
 @wp.func
@@ -311,10 +316,7 @@ def integrate_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
 
     @wp.kernel
     def integrate_bodies(
-        body_first: wp.array(dtype=int),
-        body_count: wp.array(dtype=int),
-        body_mass: wp.array(dtype=float),
-        body_inertia: wp.array(dtype=wp.vec3),
+        members: MemberPlacement,
         body_world: wp.array(dtype=int),
         sphere_f: wp.array(dtype=wp.vec3),
         sphere_t: wp.array(dtype=wp.vec3),
@@ -322,18 +324,9 @@ def integrate_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
         use_external: int,
         gravity: wp.vec3,
         dt: float,
-        active_in: wp.array(dtype=int),
-        q_in: wp.array(dtype=wp.vec3),
-        rot_in: wp.array(dtype=wp.quat),
-        v_in: wp.array(dtype=wp.vec3),
-        w_in: wp.array(dtype=wp.vec3),
-        active_out: wp.array(dtype=int),
-        q_out: wp.array(dtype=wp.vec3),
-        rot_out: wp.array(dtype=wp.quat),
-        v_out: wp.array(dtype=wp.vec3),
-        w_out: wp.array(dtype=wp.vec3),
+        bodies_in: BodyStates,
+        bodies_out: BodyStates,
         world_paused: wp.array(dtype=int),
-        members: MemberPlacement,
         sphere_x_out: wp.array(dtype=wp.vec3),
     ):
         """Semi-implicit (symplectic) Euler step of rigid bodies. Removed bodies and bodies of a
@@ -352,35 +345,35 @@ def integrate_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
         if wp.static(fused):
             if b == 0:  # the placement launch of this step has run: the views will be those written here
                 members.request[0] = 0
-        act = active_in[b]
-        active_out[b] = act
+        act = bodies_in.active[b]
+        bodies_out.active[b] = act
         if act == 0 or world_paused[body_world[b]] != 0:
-            q_out[b] = q_in[b]
-            rot_out[b] = rot_in[b]
-            v_out[b] = wp.vec3(0.0)
-            w_out[b] = wp.vec3(0.0)
+            bodies_out.q[b] = bodies_in.q[b]
+            bodies_out.rot[b] = bodies_in.rot[b]
+            bodies_out.v[b] = wp.vec3(0.0)
+            bodies_out.w[b] = wp.vec3(0.0)
             if wp.static(fused):
-                place_members(b, q_in[b], rot_in[b], wp.vec3(0.0), wp.vec3(0.0), act, members, sphere_x_out)
+                place_members(b, bodies_in.q[b], bodies_in.rot[b], wp.vec3(0.0), wp.vec3(0.0), act, members, sphere_x_out)
             return
         f = wp.vec3(0.0)
         t = wp.vec3(0.0)
-        first = body_first[b]
-        for s in range(first, first + body_count[b]):
+        first = members.first[b]
+        for s in range(first, first + members.count[b]):
             f = f + sphere_f[s]
             t = t + sphere_t[s]
         if use_external != 0:
             f = f + external_f[b]
-        m = body_mass[b]
-        v = v_in[b] + (f / m + gravity) * dt
-        x = q_in[b] + v * dt
+        m = members.mass[b]
+        v = bodies_in.v[b] + (f / m + gravity) * dt
+        x = bodies_in.q[b] + v * dt
         # rotation in float64: angular momentum L = R I R^T w advanced by the torque, orientation
         # by the implicit midpoint rule R' = exp(h w_half) R with w_half = w(L, exp(h/2 w_half) R)
         # (three fixed-point sweeps); conserves |L| exactly and E to O(h^2) without float32 drift
-        rf = rot_in[b]
+        rf = bodies_in.rot[b]
         r = wp.normalize(wp.quatd(wp.float64(rf[0]), wp.float64(rf[1]), wp.float64(rf[2]), wp.float64(rf[3])))
-        inertia_f = body_inertia[b]
+        inertia_f = members.inertia[b]
         inertia = wp.vec3d(wp.float64(inertia_f[0]), wp.float64(inertia_f[1]), wp.float64(inertia_f[2]))
-        wf = w_in[b]
+        wf = bodies_in.w[b]
         w0 = wp.vec3d(wp.float64(wf[0]), wp.float64(wf[1]), wp.float64(wf[2]))
         h = wp.float64(dt)
         l_world = wp.quat_rotate(r, wp.cw_mul(inertia, wp.quat_rotate_inv(r, w0))) + wp.vec3d(
@@ -392,10 +385,10 @@ def integrate_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
         w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
         r_new = wp.quat(float(r_new64[0]), float(r_new64[1]), float(r_new64[2]), float(r_new64[3]))
         w_new = wp.vec3(float(w_new64[0]), float(w_new64[1]), float(w_new64[2]))
-        q_out[b] = x
-        rot_out[b] = r_new
-        v_out[b] = v
-        w_out[b] = w_new
+        bodies_out.q[b] = x
+        bodies_out.rot[b] = r_new
+        bodies_out.v[b] = v
+        bodies_out.w[b] = w_new
         if wp.static(fused):
             place_members(b, x, r_new, v, w_new, act, members, sphere_x_out)
 
@@ -417,13 +410,8 @@ def isolate_unstable_bodies_kernel(place_members_after: bool = False) -> "wp.Ker
     @wp.kernel
     def isolate_unstable_bodies(
         body_world: wp.array(dtype=int),
-        active: wp.array(dtype=int),
-        q_in: wp.array(dtype=wp.vec3),
-        rot_in: wp.array(dtype=wp.quat),
-        q_out: wp.array(dtype=wp.vec3),
-        rot_out: wp.array(dtype=wp.quat),
-        v_out: wp.array(dtype=wp.vec3),
-        w_out: wp.array(dtype=wp.vec3),
+        bodies_in: BodyStates,
+        bodies_out: BodyStates,
         v_max: float,
         world_fail: wp.array(dtype=int),
         world_paused: wp.array(dtype=int),
@@ -435,13 +423,13 @@ def isolate_unstable_bodies_kernel(place_members_after: bool = False) -> "wp.Ker
         recorded in ``world_fail`` and the world is paused, so the bad values never reach another
         step or another world. Reads no pause flag (the flags it writes act from the next step)."""
         b = wp.tid()
-        if active[b] == 0:
+        if bodies_out.active[b] == 0:
             return
-        v = v_out[b]
-        w = w_out[b]
-        r = rot_out[b]
+        v = bodies_out.v[b]
+        w = bodies_out.w[b]
+        r = bodies_out.rot[b]
         code = int(0)
-        if not (wp.isfinite(q_out[b]) and wp.isfinite(v) and wp.isfinite(w)
+        if not (wp.isfinite(bodies_out.q[b]) and wp.isfinite(v) and wp.isfinite(w)
                 and wp.isfinite(r[0]) and wp.isfinite(r[1]) and wp.isfinite(r[2]) and wp.isfinite(r[3])):
             code = UNSTABLE_NONFINITE
         elif wp.dot(v, v) > v_max * v_max:
@@ -451,12 +439,13 @@ def isolate_unstable_bodies_kernel(place_members_after: bool = False) -> "wp.Ker
         world = body_world[b]
         wp.atomic_cas(world_fail, world, 0, code)
         world_paused[world] = 1
-        q_out[b] = q_in[b]
-        rot_out[b] = rot_in[b]
-        v_out[b] = wp.vec3(0.0)
-        w_out[b] = wp.vec3(0.0)
+        bodies_out.q[b] = bodies_in.q[b]
+        bodies_out.rot[b] = bodies_in.rot[b]
+        bodies_out.v[b] = wp.vec3(0.0)
+        bodies_out.w[b] = wp.vec3(0.0)
         if wp.static(fused):
-            place_members(b, q_in[b], rot_in[b], wp.vec3(0.0), wp.vec3(0.0), active[b], members, sphere_x_out)
+            place_members(b, bodies_in.q[b], bodies_in.rot[b], wp.vec3(0.0), wp.vec3(0.0), bodies_out.active[b], members,
+                          sphere_x_out)
 
     return isolate_unstable_bodies
 

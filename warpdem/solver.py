@@ -70,6 +70,14 @@ def resolve_performance_options(on_gpu: bool, neighbour_layout: str = "auto", hi
     return out[0], out[1], bool(fused_placement)
 
 
+def body_states(state: State) -> kernels.BodyStates:
+    """The bodies of ``state`` packed for the integrator and the placement kernels."""
+    bodies = kernels.BodyStates()
+    bodies.active, bodies.q, bodies.rot = state.body_active, state.body_q, state.body_rot
+    bodies.v, bodies.w = state.body_v, state.body_w
+    return bodies
+
+
 # names of the State arrays that hold per-sphere contact slots
 HISTORY_ARRAYS = ("contact_partner", "contact_spring", "contact_roll", "contact_wnormal")
 
@@ -415,16 +423,13 @@ class DEMSolver:
         f_ext, use_ext = self.external_force, self.use_external_force
         if self.body_forces:
             f_ext, use_ext = self.apply_body_forces(state_in, state_out, dt), True
+        bodies_in, bodies_out = body_states(state_in), body_states(state_out)
         wp.launch(self._integrate, dim=m.num_bodies, inputs=[
-            m.body_first, m.body_count, m.body_mass, m.body_inertia, m.body_world, self.sphere_f, self.sphere_t,
-            f_ext, int(use_ext), wp.vec3(*m.gravity), dt,
-            state_in.body_active, state_in.body_q, state_in.body_rot, state_in.body_v, state_in.body_w,
-            state_out.body_active, state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
-            self.world_paused, self._members, state_out.sphere_x], device=d)
+            self._members, m.body_world, self.sphere_f, self.sphere_t, f_ext, int(use_ext), wp.vec3(*m.gravity), dt,
+            bodies_in, bodies_out, self.world_paused, state_out.sphere_x], device=d)
         wp.launch(self._isolate, dim=m.num_bodies, inputs=[
-            m.body_world, state_out.body_active, state_in.body_q, state_in.body_rot,
-            state_out.body_q, state_out.body_rot, state_out.body_v, state_out.body_w,
-            self.v_max, self.world_fail, self.world_paused, self._members, state_out.sphere_x], device=d)
+            m.body_world, bodies_in, bodies_out, self.v_max, self.world_fail, self.world_paused, self._members,
+            state_out.sphere_x], device=d)
         if self.fused_placement:
             self._views_of = state_out
         wp.launch(kernels.advance_time, dim=1, inputs=[state_in.time, dt, state_out.time], device=d)
@@ -458,9 +463,8 @@ class DEMSolver:
     def place_spheres(self, state: State) -> None:
         """Sphere positions (``state.sphere_x``) and packed views from the body poses."""
         m = self.model
-        wp.launch(kernels.place_sphere_views, dim=m.num_spheres, inputs=[
-            self._members, state.body_q, state.body_rot, state.body_v, state.body_w, state.body_active,
-            state.sphere_x], device=m.device)
+        wp.launch(kernels.place_sphere_views, dim=m.num_spheres, inputs=[self._members, body_states(state), state.sphere_x],
+                  device=m.device)
 
     def _place_spheres_on_request(self, state: State) -> None:
         """``fused_placement``: the placement launch of a step, which returns at once unless the
@@ -471,8 +475,7 @@ class DEMSolver:
             self.place_request.fill_(1)
         threads = min(m.num_spheres, kernels.MAX_PLACEMENT_THREADS)
         wp.launch(kernels.place_sphere_views_on_request, dim=threads, inputs=[
-            self.rebuild, m.num_spheres, threads, self._members, state.body_q, state.body_rot, state.body_v,
-            state.body_w, state.body_active, state.sphere_x], device=m.device)
+            self.rebuild, m.num_spheres, threads, self._members, body_states(state), state.sphere_x], device=m.device)
 
     def invalidate_views(self) -> None:
         """With ``fused_placement``: place every sphere from its State at the start of the next
