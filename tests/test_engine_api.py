@@ -238,3 +238,34 @@ def test_paused_world_holds_still_with_its_contacts():
     assert not np.array_equal(sim.state.body_q.numpy()[3], x0[3])    # released: falls again
     with pytest.raises(wd.ConfigError, match="out of range"):
         sim.pause_worlds([2])
+
+
+def test_kinetic_energy_is_summed_per_world_in_body_order():
+    """Each body's translational + rotational energy, summed per world in float64 (on a GPU an
+    atomic float32 sum changed in the last digits from run to run)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_contact_stages import SCENES
+
+    sim = SCENES["clumps"]()
+    sim.run(200)
+    s, m = sim.state, sim.model
+    v, w = s.body_v.numpy().astype(float), s.body_w.numpy().astype(float)
+    q = s.body_rot.numpy().astype(float)  # (x, y, z, w)
+    inertia = m.host["body_inertia"].astype(float)
+    e = []
+    for b in range(m.num_bodies):
+        x, y, z, qw = q[b]
+        rot = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * qw), 2 * (x * z + y * qw)],
+                        [2 * (x * y + z * qw), 1 - 2 * (x * x + z * z), 2 * (y * z - x * qw)],
+                        [2 * (x * z - y * qw), 2 * (y * z + x * qw), 1 - 2 * (x * x + y * y)]])
+        wb = rot.T @ w[b]
+        e.append(0.5 * m.host["body_mass"][b] * v[b] @ v[b] + 0.5 * wb @ (inertia[b] * wb))
+    e = np.array(e) * s.body_active.numpy()
+    want = np.bincount(m.host["body_world"], weights=e, minlength=m.num_worlds)
+    got = sim.kinetic_energy()
+    assert got.dtype == np.float64 and want.sum() > 0
+    np.testing.assert_allclose(got, want, rtol=1e-5)
+    assert np.array_equal(sim.kinetic_energy(), got)

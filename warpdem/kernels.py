@@ -749,20 +749,21 @@ def flag_moved_spheres(
 def kinetic_energy(
     body_mass: wp.array(dtype=float),
     body_inertia: wp.array(dtype=wp.vec3),
-    body_world: wp.array(dtype=int),
     active: wp.array(dtype=int),
     rot: wp.array(dtype=wp.quat),
     v: wp.array(dtype=wp.vec3),
     w: wp.array(dtype=wp.vec3),
-    ke_world: wp.array(dtype=float),
+    ke_body: wp.array(dtype=float),
 ):
-    """Translational + rotational kinetic energy summed per world [J]."""
+    """Translational + rotational kinetic energy of each body [J] (0 for a removed body); summed
+    per world on the host in body order (:meth:`warpdem.solver.Simulation.kinetic_energy`), so the
+    sum is the same on every run (an atomic sum on a GPU differs in the last digits)."""
     b = wp.tid()
     if active[b] == 0:
+        ke_body[b] = 0.0
         return
     wb = wp.quat_rotate_inv(rot[b], w[b])
-    e = 0.5 * body_mass[b] * wp.dot(v[b], v[b]) + 0.5 * wp.dot(wb, wp.cw_mul(body_inertia[b], wb))
-    wp.atomic_add(ke_world, body_world[b], e)
+    ke_body[b] = 0.5 * body_mass[b] * wp.dot(v[b], v[b]) + 0.5 * wp.dot(wb, wp.cw_mul(body_inertia[b], wb))
 
 
 @wp.kernel

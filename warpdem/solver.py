@@ -938,14 +938,15 @@ class Simulation:
 
     # ---------------------------------------------------------------- read-back
     def kinetic_energy(self) -> np.ndarray:
-        """Kinetic energy per world [J]."""
+        """Kinetic energy per world [J]: each body's (float32, on the device), summed per world in
+        body order in float64 on the host, so the same State always gives the same figure."""
         m = self.model
-        ke = wp.zeros(m.num_worlds, dtype=float, device=m.device)
+        ke = wp.empty(m.num_bodies, dtype=float, device=m.device)
         s = self.state
         wp.launch(kernels.kinetic_energy, dim=m.num_bodies,
-                  inputs=[m.body_mass, m.body_inertia, m.body_world, s.body_active, s.body_rot, s.body_v, s.body_w, ke],
+                  inputs=[m.body_mass, m.body_inertia, s.body_active, s.body_rot, s.body_v, s.body_w, ke],
                   device=m.device)
-        return ke.numpy().astype(np.float64)
+        return np.bincount(m.host["body_world"], weights=ke.numpy().astype(np.float64), minlength=m.num_worlds)
 
     def sphere_positions(self) -> np.ndarray:
         """World positions of all spheres at the current state (n, 3) [m]."""
