@@ -53,28 +53,48 @@ def _fig(paths: Mapping[str, os.PathLike], name: str, caption: str) -> list[Figu
 
 
 def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.PathLike]) -> Report:
-    """The report of ``result``; ``figure_paths`` maps figure stems to PNG files (embedded)."""
-    s = result.settings
-    w, cut = s.within_sigma, s.cutoff
+    """The report of ``result``; ``figure_paths`` maps figure stems to PNG files (embedded). Read
+    top-down: verdict, comparison, where the base model fails (or its plausible set), each ranking
+    round with what to measure next, the error history, surrogates and DEM noise."""
     obs = result.observations
-    base, final = result.base, result.final
+    base = result.base
+    sections = [_comparison_section(result, figure_paths), *_adequacy_sections(result, figure_paths)]
+    for i, rnd in enumerate(result.rounds):
+        sections += _ranking_sections(result, rnd, i, figure_paths)
+    if len(result.history.versions) > 1:
+        sections.append(_error_history_section(result, figure_paths))
+    sections.append(_surrogate_section(result))
+    return Report(title="Model versus measurement: diagnosis", verdict=_verdict(result), sections=sections,
+                  next_steps=result.next_steps,
+                  subtitle=f"{len(obs)} observables · base parameters: {', '.join(base.version.space.names)} · "
+                           f"candidates: {', '.join(c.words for c in result.candidates) or 'none'}",
+                  footer=_footer(result))
+
+
+def _verdict(result: "DiagnosisResult") -> Verdict:
+    """The headline, its first detail and the key numbers: largest |z| and chi^2 per observable
+    of the base and final versions, observables within 2 sigma, DEM runs, wall time."""
     first, last = result.history.versions[0], result.history.versions[-1]
     numbers = [("base model: largest |z| (DEM)", first.max_abs_z),
                ("base model: χ² per observable", first.chi2_per_observable)]
     if len(result.versions) > 1:
-        numbers += [(f"{final.name}: largest |z|", last.max_abs_z),
-                    (f"{final.name}: χ² per observable", last.chi2_per_observable)]
+        numbers += [(f"{result.final.name}: largest |z|", last.max_abs_z),
+                    (f"{result.final.name}: χ² per observable", last.chi2_per_observable)]
     numbers += [("observables within 2σ (final)", f"{last.n_within} of {last.n_observables}"),
                 ("DEM runs (set × fill, each in every experiment)", result.forward["runs"]),
                 ("wall time (s)", round(result.seconds["total"], 1))]
-    verdict = Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers)
+    return Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers)
 
-    # --- comparison
+
+def _comparison_section(result: "DiagnosisResult", figure_paths: Mapping[str, os.PathLike]) -> Section:
+    """Measured against simulated at each version's best fit, with z-scores."""
+    s = result.settings
+    w, cut = s.within_sigma, s.cutoff
     cols = ["observable", "unit", "measured (mean ± SE, n)"]
     for v in result.versions:
         cols += [f"{v.name}: DEM mean ± spread", f"{v.name}: z"]
     rows = []
-    for j, o in enumerate(obs):
+    for j, o in enumerate(result.observations):
         meas = (f"< {o.detection_limit:g} (no value, n={o.n})" if o.is_censored
                 else f"{o.mean:.4g} ± {o.standard_error:.2g} (n={o.n})")
         row = [o.name, o.unit, meas]
@@ -82,7 +102,7 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
             c = v.confirmation
             row += [f"{c.mean[j]:.4g} ± {c.spread[j]:.2g}", _z_cell(c.z[j], w, cut)]
         rows.append(row)
-    comparison = Section("Comparison at the best fit", [
+    return Section("Comparison at the best fit", [
         "Each model version is calibrated on all observables at once and then re-simulated at its best fit "
         f"({s.confirm_replicates} fresh fills). z = (measured − simulated) / σ, with σ² = SE² + s_DEM²/n + "
         "Var(simulated mean) (history matching, Vernon et al. 2010). Green: |z| ≤ 2, amber: ≤ 3, red: beyond.",
@@ -91,7 +111,11 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
                                           "spread over fills) values per experiment."),
     ])
 
-    # --- where it fails
+
+def _adequacy_sections(result: "DiagnosisResult", figure_paths: Mapping[str, os.PathLike]) -> list[Section]:
+    """Where the base model fails (the observables in conflict), or, when it is adequate, its
+    plausible set."""
+    obs, base = result.observations, result.base
     a = base.adequacy
     fail_blocks: list = [a.sentence]
     if a.unreachable or a.conflicts:
@@ -103,8 +127,7 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
     fail_blocks += list(a.notes)
     fail_blocks += _fig(figure_paths, "residuals", "Residual of every observable for each model version; "
                                                     "the green band is the target |z| ≤ 2, red dashes the cut-off 3.")
-    sections = [comparison, Section("Where the base model fails" if not a.adequate else "Adequacy of the base model",
-                                    fail_blocks)]
+    sections = [Section("Where the base model fails" if not a.adequate else "Adequacy of the base model", fail_blocks)]
     if a.adequate:
         sp = base.version.space
         sections.append(Section("Plausible set (the ambiguity the data leave)", [
@@ -114,87 +137,97 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
             *_fig(figure_paths, "plausible_set", "Parameter ranges in which every observable stays within "
                                                  "implausibility 3."),
         ]))
+    return sections
 
-    # --- ranking
-    for i, r in enumerate(result.rounds):
-        suffix = "" if i == 0 else f"_{i + 1}"
-        rows = []
-        for c in r.candidates:
-            d = c.to_dict()
-            eff = ", ".join(f"{k} = {c.study.best_parameters[k]:.3g}" for k in c.effect.parameter_names)
-            rows.append([c.rank, c.effect.words, eff, f"{c.log_evidence:.1f} ± {c.study.evidence.standard_error:.2f}",
-                         Cell(round(c.log_bayes, 1), "good" if c.log_bayes > np.log(20) else ""),
-                         bayes_factor_words(c.log_bayes), round(d["bic"], 1), round(d["aic"], 1),
-                         _z_cell(d["max_abs_z"], w, cut), f"{int(np.sum(np.abs(c.z) <= w))} of {len(obs)}",
-                         round(c.signature.alignment, 2)])
-        blocks: list = [
-            f"Each candidate is added to the {r.current.name} model and calibrated with its own design; the ranking is "
-            "by the Bayes factor B from the surrogate-integrated evidence Z (uniform prior over each parameter "
-            "box), which charges for the part of an added parameter's range the data rule out (Kass & Raftery "
-            "1995 reading). BIC and AIC are listed for reference; the alignment is the cosine between the "
-            "effect's signature and the current residuals (+1: points exactly at the data).",
-            Table(["rank", "effect", "calibrated effect parameters", "ln Z ± MC error", f"ln B vs {r.current.name}",
-                   "reading", "BIC", "AIC", "largest |z| (DEM)", f"within {w:g}σ", "alignment"], rows,
-                  caption=f"Candidate effects on top of the {r.current.name}"),
-            *[c.sentence for c in r.candidates],
-            *_fig(figure_paths, "signatures" + suffix,
-                  "How each effect moves every observable (full strength, at the current best fit) beside what "
-                  "the current model misses."),
-        ]
-        if r.chosen:
-            blocks.append(f"Chosen: {r.reason}.")
-        elif r.reason:
-            blocks.append(r.reason[0].upper() + r.reason[1:] + ".")
-        sections.append(Section("Ranking of the candidate effects" + (f" (round {i + 1})" if i else ""), blocks))
-        if r.discrimination is not None:
-            d = r.discrimination
-            words = {c.name: c.effect.words for c in r.candidates}
-            frows = [[f.proposal.name, f.proposal.unit] + [f"{f.means[n]:.4g} ± {f.sds[n]:.2g}" for n in d.candidates]
-                     + [round(f.measurement_sd, 3), Cell(round(f.separation, 2), "good" if f.separation >= d.threshold else "")]
-                     for f in d.forecasts]
-            sections.append(Section("What to measure next", [
-                d.sentence,
-                *([Table(["proposed measurement", "unit"] + [words[n] for n in d.candidates]
-                         + ["expected SE", "separation (σ)"], frows,
-                         caption="Predicted outcomes (posterior mean ± predictive sd) of each proposed measurement")]
-                  if frows else []),
-                *_fig(figure_paths, "discrimination" + suffix, "Predictions of the tied candidates at the best "
-                                                               "proposed conditions."),
-            ]))
 
-    # --- error history
-    if len(result.history.versions) > 1:
-        hrows = [[v.version, v.n_parameters, round(v.chi2, 2), v.dof, v.chi2_per_dof, round(v.chi2_per_observable, 3),
-                  _z_cell(v.max_abs_z, w, cut), f"{v.n_within} of {v.n_observables}"] for v in result.history.versions]
-        sections.append(Section("Error history: add the effect and watch the error fall", [
-            Table(["model version", "parameters", "χ²", "dof", "χ²/dof", "χ² per observable", "largest |z|",
-                   f"within {w:g}σ"], hrows, caption="DEM-confirmed errors of each model version"),
-            *_fig(figure_paths, "error_history", "Error of every observable and in total across model versions."),
+def _ranking_sections(result: "DiagnosisResult", r, i: int, figure_paths: Mapping[str, os.PathLike]) -> list[Section]:
+    """Ranking round ``i`` (``r``): the candidates' table and sentences, the choice, and what to
+    measure next when candidates tied."""
+    w, cut = result.settings.within_sigma, result.settings.cutoff
+    obs = result.observations
+    suffix = "" if i == 0 else f"_{i + 1}"
+    rows = []
+    for c in r.candidates:
+        d = c.to_dict()
+        eff = ", ".join(f"{k} = {c.study.best_parameters[k]:.3g}" for k in c.effect.parameter_names)
+        rows.append([c.rank, c.effect.words, eff, f"{c.log_evidence:.1f} ± {c.study.evidence.standard_error:.2f}",
+                     Cell(round(c.log_bayes, 1), "good" if c.log_bayes > np.log(20) else ""),
+                     bayes_factor_words(c.log_bayes), round(d["bic"], 1), round(d["aic"], 1),
+                     _z_cell(d["max_abs_z"], w, cut), f"{int(np.sum(np.abs(c.z) <= w))} of {len(obs)}",
+                     round(c.signature.alignment, 2)])
+    blocks: list = [
+        f"Each candidate is added to the {r.current.name} model and calibrated with its own design; the ranking is "
+        "by the Bayes factor B from the surrogate-integrated evidence Z (uniform prior over each parameter "
+        "box), which charges for the part of an added parameter's range the data rule out (Kass & Raftery "
+        "1995 reading). BIC and AIC are listed for reference; the alignment is the cosine between the "
+        "effect's signature and the current residuals (+1: points exactly at the data).",
+        Table(["rank", "effect", "calibrated effect parameters", "ln Z ± MC error", f"ln B vs {r.current.name}",
+               "reading", "BIC", "AIC", "largest |z| (DEM)", f"within {w:g}σ", "alignment"], rows,
+              caption=f"Candidate effects on top of the {r.current.name}"),
+        *[c.sentence for c in r.candidates],
+        *_fig(figure_paths, "signatures" + suffix,
+              "How each effect moves every observable (full strength, at the current best fit) beside what "
+              "the current model misses."),
+    ]
+    if r.chosen:
+        blocks.append(f"Chosen: {r.reason}.")
+    elif r.reason:
+        blocks.append(r.reason[0].upper() + r.reason[1:] + ".")
+    sections = [Section("Ranking of the candidate effects" + (f" (round {i + 1})" if i else ""), blocks)]
+    if r.discrimination is not None:
+        d = r.discrimination
+        words = {c.name: c.effect.words for c in r.candidates}
+        frows = [[f.proposal.name, f.proposal.unit] + [f"{f.means[n]:.4g} ± {f.sds[n]:.2g}" for n in d.candidates]
+                 + [round(f.measurement_sd, 3), Cell(round(f.separation, 2), "good" if f.separation >= d.threshold else "")]
+                 for f in d.forecasts]
+        sections.append(Section("What to measure next", [
+            d.sentence,
+            *([Table(["proposed measurement", "unit"] + [words[n] for n in d.candidates]
+                     + ["expected SE", "separation (σ)"], frows,
+                     caption="Predicted outcomes (posterior mean ± predictive sd) of each proposed measurement")]
+              if frows else []),
+            *_fig(figure_paths, "discrimination" + suffix, "Predictions of the tied candidates at the best "
+                                                           "proposed conditions."),
         ]))
+    return sections
 
-    # --- surrogates and cost
+
+def _error_history_section(result: "DiagnosisResult", figure_paths: Mapping[str, os.PathLike]) -> Section:
+    """The DEM-confirmed errors of every model version, in order."""
+    w, cut = result.settings.within_sigma, result.settings.cutoff
+    hrows = [[v.version, v.n_parameters, round(v.chi2, 2), v.dof, v.chi2_per_dof, round(v.chi2_per_observable, 3),
+              _z_cell(v.max_abs_z, w, cut), f"{v.n_within} of {v.n_observables}"] for v in result.history.versions]
+    return Section("Error history: add the effect and watch the error fall", [
+        Table(["model version", "parameters", "χ²", "dof", "χ²/dof", "χ² per observable", "largest |z|",
+               f"within {w:g}σ"], hrows, caption="DEM-confirmed errors of each model version"),
+        *_fig(figure_paths, "error_history", "Error of every observable and in total across model versions."),
+    ])
+
+
+def _surrogate_section(result: "DiagnosisResult") -> Section:
+    """Cross-validated quality of every surrogate and the DEM noise, then the refinement waves."""
+    obs = result.observations
     qrows = []
     for v in result.versions:
         for q, sd in zip(v.surrogates.quality, v.noise_sd):
             o = obs[obs.index(q.key)]
             qrows.append([v.name, o.name, o.unit, q.n_train, q.r2, q.rmse, q.coverage_2sd, sd])
-    sections.append(Section("Surrogates and DEM noise", [
+    return Section("Surrogates and DEM noise", [
         "One Gaussian process per observable (Matern 5/2 with one length scale per parameter + white noise); "
         "quality from k-fold cross-validation; the DEM noise is the pooled fill-to-fill sd over the design's "
         "replicates.",
         Table(["model version", "observable", "unit", "design sets", "CV R²", "CV RMSE", "CV coverage of ±2 sd",
                "DEM noise sd"], qrows),
-        *_refinement_blocks(result, w, cut),
-    ]))
+        *_refinement_blocks(result, result.settings.within_sigma, result.settings.cutoff),
+    ])
+
+
+def _footer(result: "DiagnosisResult") -> str:
+    """The forward model's calls, runs and time, and the total."""
     f = result.forward
     up = f.get("designs_up_front") or {}
     up_words = (f" (designs up front in one call: {up['worlds_used']} of {up['worlds_run']} worlds used)"
                 if up.get("on") and "worlds_run" in up else "")
-    footer = (f"warpdem diagnosis · forward model: {f['calls']} calls{up_words}, {f['runs']} runs "
-              f"({f['failed_runs']} failed), {f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · "
-              "every number is in diagnosis.json")
-    return Report(title="Model versus measurement: diagnosis", verdict=verdict, sections=sections,
-                  next_steps=result.next_steps,
-                  subtitle=f"{len(obs)} observables · base parameters: {', '.join(base.version.space.names)} · "
-                           f"candidates: {', '.join(c.words for c in result.candidates) or 'none'}",
-                  footer=footer)
+    return (f"warpdem diagnosis · forward model: {f['calls']} calls{up_words}, {f['runs']} runs "
+            f"({f['failed_runs']} failed), {f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · "
+            "every number is in diagnosis.json")
