@@ -308,7 +308,9 @@ class DEMForwardModel(ForwardModel):
                         o = self.observables[keys[k]]
                         rec = self._cache[self._world_id(model_fp, exp_fp, ps, r, o.settings.get("rpm"))]
                         v = (rec.get("observables") or {}).get(o.quantity)
-                        out[i, r, k] = np.nan if v is None or rec.get("status") != "ok" else float(v)
+                        # a failed world may still hold what it measured before the failure (e.g. A's
+                        # bulk density when no angle could be measured); the failed quantity is None
+                        out[i, r, k] = np.nan if v is None else float(v)
         return out
 
     def _run_worlds(self, exp_name: str, settings: Mapping[str, Any], desc: ModelDescription,

@@ -48,6 +48,16 @@ def _z_cell(z: float, within: float, cutoff: float) -> Cell:
     return Cell(round(float(z), 2), tone)
 
 
+def _dem_cell(c, j: int) -> str:
+    """DEM mean ± spread of observable ``j`` at a confirmation, saying how many fills gave a value
+    when some did not (a measurement that failed on a fill: its error is in the DEM records)."""
+    n, reps = int(c.n_ok[j]), int(c.replicates)
+    if n == 0:
+        return f"no value (0 of {reps} fills)"
+    value = f"{c.mean[j]:.4g}" + (f" ± {c.spread[j]:.2g}" if n > 1 and np.isfinite(c.spread[j]) else "")
+    return value if n >= reps else f"{value} ({n} of {reps} fills)"
+
+
 def _fig(paths: Mapping[str, os.PathLike], name: str, caption: str) -> list[Figure]:
     return [Figure.from_path(paths[name], caption, name.replace("_", " "))] if name in paths else []
 
@@ -100,7 +110,7 @@ def _comparison_section(result: "DiagnosisResult", figure_paths: Mapping[str, os
         row = [o.name, o.unit, meas]
         for v in result.versions:
             c = v.confirmation
-            row += [f"{c.mean[j]:.4g} ± {c.spread[j]:.2g}", _z_cell(c.z[j], w, cut)]
+            row += [_dem_cell(c, j), _z_cell(c.z[j], w, cut)]
         rows.append(row)
     return Section("Comparison at the best fit", [
         "Each model version is calibrated on all observables at once and then re-simulated at its best fit "

@@ -111,7 +111,9 @@ def fit_to_dict(fit) -> dict[str, Any]:
 class ExperimentResult:
     """Outcome of one world of an experiment run.
 
-    status: "ok" or "failed" (``error`` holds the message; a failed world is never dropped).
+    status: "ok" or "failed" (``error`` holds the message; a failed world is never dropped). A world
+        whose measurement failed keeps in ``observables`` what was measured before (A: the bulk
+        density when no angle could be measured), the failed quantities None.
     angle_deg: the experiment's angle (``angle_name``: alpha_AoR_S, beta_AoR_D or gamma_s) [deg].
     bulk_density: fill bulk density [kg/m^3] where the spec asks for it (A), else None.
     observables: every measured quantity of this world by name (units in the experiment's
@@ -609,6 +611,12 @@ class Experiment:
                 r.fail(f"unstable world ({unstable[w]}): frozen by the engine, its measurement is void")
             elif ctx.errors[w] is not None:
                 r.fail(ctx.errors[w])
+                # what was measured before the failed measurement stays (A: the fill's bulk density
+                # when no angle could be measured after the lift); the failed quantity is None
+                partial = {k: v for k, v in (o.get("observables") or {}).items() if v is not None}
+                if partial:
+                    r.observables = {**{k: None for k in self.OBSERVABLES},
+                                     **{k: float(v) for k, v in partial.items()}}
             elif o.get("angle") is None or not math.isfinite(o["angle"]):
                 r.fail("no angle was measured")
             else:
