@@ -308,9 +308,12 @@ class DEMForwardModel(ForwardModel):
                         o = self.observables[keys[k]]
                         rec = self._cache[self._world_id(model_fp, exp_fp, ps, r, o.settings.get("rpm"))]
                         v = (rec.get("observables") or {}).get(o.quantity)
-                        # a failed world may still hold what it measured before the failure (e.g. A's
-                        # bulk density when no angle could be measured); the failed quantity is None
-                        out[i, r, k] = np.nan if v is None else float(v)
+                        # a failed world is left out whole, even where it measured something before the
+                        # failure (A's bulk density when no angle could be measured; kept in its record):
+                        # the angles a failure hides are the steep ones, and fitting the density of those
+                        # runs alone moved the best fit of the README's first diagnosis to where no
+                        # angle could be measured (2026-11-27)
+                        out[i, r, k] = np.nan if v is None or rec.get("status") != "ok" else float(v)
         return out
 
     def _run_worlds(self, exp_name: str, settings: Mapping[str, Any], desc: ModelDescription,

@@ -572,8 +572,14 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
                      "named in the conflicts.")
     else:
         added = " and ".join(e.words for e in final.version.effects)
+        no_value = [k for k, z in last.z.items() if not math.isfinite(z)]
+        beyond = last.n_observables - last.n_within - len(no_value)
         state = (f"every observable lies within {w:g} sigma" if met
-                 else f"{last.n_observables - last.n_within} of {last.n_observables} observables remain beyond {w:g} sigma")
+                 else f"{beyond} of {last.n_observables} observables remain beyond {w:g} sigma" if beyond
+                 else f"{last.n_within} of {last.n_observables} observables lie within {w:g} sigma")
+        if no_value:
+            state += (f" and the DEM gave no value for {', '.join(final.misfit.observations[final.misfit.observations.index(k)].name for k in no_value)}"
+                      " there (its measurement failed on every fill)")
         lead = ("The base model cannot reproduce these measurements; " if not base.adequacy.adequate else "")
         headline = (f"{lead}with {added} added, {state} (DEM at the recalibrated best fit, largest |z| "
                     f"{last.max_abs_z:.1f})")
