@@ -31,6 +31,8 @@ def test_bulk_density_of_a_failed_angle_is_recorded(tmp_path):
     assert rec["observables"]["static_angle"] is None
     assert 800.0 < rec["observables"]["bulk_density"] < 3000.0  # the fill's density was measured [kg/m^3]
     assert np.isnan(out).all()  # the diagnosis leaves the failed world out whole
+    assert fm.dem_failures["baffle"]["worlds"] == 1  # and says so (warpdem diagnose prints it)
+    assert "no angle can be measured" in fm.dem_failures["baffle"]["first_error"]
 
 
 def test_report_says_how_many_fills_gave_a_value():
@@ -73,3 +75,8 @@ def test_the_verdict_names_an_observable_the_dem_could_not_measure_at_the_best_f
     assert f"the DEM gave no value for {name}" in result.headline, result.headline
     assert "remain beyond" not in result.headline
     assert not result.met
+    f = result.forward
+    assert 0 < f["missing_values"] < f["values"]  # counted, and the report's footer says it
+    from validation.report import build_report
+
+    assert f"{f['missing_values']} of {f['values']} values not measured" in build_report(result, {}).to_html()

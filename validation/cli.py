@@ -258,13 +258,17 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
         timing = {"wall_s": wall, "dem_s": round(forward.dem_seconds, 1), "dem_worlds_run": forward.dem_worlds,
                   "dem_launches": forward.log, "merged_requests": pool.merges,
                   "diagnoses_in_this_process": [str(j[0]) for j in jobs], "device": str(forward.device or "default"),
-                  "designs_up_front": result.forward.get("designs_up_front")}
+                  "designs_up_front": result.forward.get("designs_up_front"),
+                  "failed_worlds": getattr(forward, "dem_failures", {})}
         (out / "dem_timing.json").write_text(json.dumps(timing, indent=1))
         if len(jobs) > 1:
             print(f"{path}:")
         print(result.headline)
         print(f"report: {paths.get('report', out / 'report.html')}  (wall {timing['wall_s']} s, DEM {timing['dem_s']} s, "
               f"{timing['dem_worlds_run']} worlds run{' for all configs' if len(jobs) > 1 else ''})")
+        for exp_name, f in timing["failed_worlds"].items():
+            print(f"  {f['worlds']} {exp_name} world(s) failed a measurement (left out of the fits; each one's error "
+                  f"is in the DEM records), e.g. {f['first_error']}")
     return 0
 
 if __name__ == "__main__":

@@ -122,6 +122,9 @@ class DEMForwardModel(ForwardModel):
         self.superset = bool(superset)
         self.dem_seconds = 0.0
         self.dem_worlds = 0
+        # worlds run whose measurement failed, per experiment, with the first error seen (each failed
+        # world's error is in its cache record)
+        self.dem_failures: dict[str, dict[str, Any]] = {}
         self.log: list[dict[str, Any]] = []
         if self.cache_path is not None and self.cache_path.exists():
             self._load_cache()
@@ -341,6 +344,10 @@ class DEMForwardModel(ForwardModel):
         self.log.append({"experiment": exp_name, "settings": dict(settings), "worlds": len(sets),
                          "wall_s": round(wall, 2), "model": desc.contact_law.describe(),
                          "material": desc.material.name})
+        for res in results:
+            if not res.ok:
+                f = self.dem_failures.setdefault(exp_name, {"worlds": 0, "first_error": res.error})
+                f["worlds"] += 1
         for (i, r, rpm, wid), res in zip(todo, results):
             self._store({"id": wid, "experiment": exp_name, "status": res.status, "error": res.error,
                          "parameters": dict(parameter_sets[i]), "replicate": r, "rpm": rpm,

@@ -115,6 +115,8 @@ class ForwardRunner:
         self.calls = 0
         self.runs = 0
         self.failed_runs = 0
+        self.values = 0  # observables asked for over all runs
+        self.missing_values = 0  # of which no value came back (a measurement failed)
         self.seconds = 0.0
 
     def __call__(self, effects: tuple[str, ...], parameter_sets: Sequence[Mapping[str, float]],
@@ -133,10 +135,13 @@ class ForwardRunner:
             self.calls += 1
             self.runs += int(counts.sum())
             self.failed_runs += int(np.sum(np.all(np.isnan(out), axis=2) & ran))
+            self.values += int(np.sum(ran)) * out.shape[2]
+            self.missing_values += int(np.sum(np.isnan(out) & ran[:, :, None]))
         return out
 
     def to_dict(self) -> dict[str, Any]:
-        return {"calls": self.calls, "runs": self.runs, "failed_runs": self.failed_runs, "seconds": self.seconds}
+        return {"calls": self.calls, "runs": self.runs, "failed_runs": self.failed_runs, "values": self.values,
+                "missing_values": self.missing_values, "seconds": self.seconds}
 
 
 def replicate_counts(replicates: int | Sequence[int], n_sets: int) -> np.ndarray:

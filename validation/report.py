@@ -238,6 +238,8 @@ def _footer(result: "DiagnosisResult") -> str:
     up = f.get("designs_up_front") or {}
     up_words = (f" (designs up front in one call: {up['worlds_used']} of {up['worlds_run']} worlds used)"
                 if up.get("on") and "worlds_run" in up else "")
+    missing = (f"; {f['missing_values']} of {f['values']} values not measured"
+               if f.get("missing_values") else "")
     return (f"warpdem diagnosis · forward model: {f['calls']} calls{up_words}, {f['runs']} runs "
-            f"({f['failed_runs']} failed), {f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · "
+            f"({f['failed_runs']} failed{missing}), {f['seconds']:.1f} s · total {result.seconds['total']:.1f} s · "
             "every number is in diagnosis.json")
