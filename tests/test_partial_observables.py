@@ -1,6 +1,6 @@
 """A world whose angle cannot be measured keeps, in its record, what it measured before: the
 baffle test's bulk density is taken from the fill before the lift, so a pile whose face leaves too
-few profile bins for an angle (15 of 100 quick-scale baffle runs of the README's first diagnosis)
+few profile bins for an angle (7-15 of the 100 quick-scale worlds of the README's first diagnosis)
 still reports its density. The diagnosis leaves such a world out whole (the angles a failure hides
 are the steep ones; fitting the density of those runs alone moved the first diagnosis's best fit to
 where no angle could be measured). The report says how many fills gave a value instead of printing
