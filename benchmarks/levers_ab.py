@@ -28,19 +28,10 @@ import warp as wp
 import warpdem as wd
 
 from settled_bed import build, load_settled_state  # noqa: E402  (run from benchmarks/)
-from warpdem.bench_settled_bed import LEVER_VARIANTS, force_kernel_resources, quiet_warp, time_steps  # noqa: E402
+from warpdem.bench_settled_bed import (LEVER_VARIANTS, force_kernel_resources, option_value, quiet_warp,  # noqa: E402
+                                      time_steps)
 
 VARIANTS = {**LEVER_VARIANTS, "default": {}}  # "default" is "auto" (all on a GPU, none on the CPU)
-
-
-def option_value(text: str):
-    """A ``--compare`` value: ``none`` -> None, an integer -> int, else the text."""
-    if text == "none":
-        return None
-    try:
-        return int(text)
-    except ValueError:
-        return text
 
 
 def main(argv=None) -> list[dict]:

@@ -40,14 +40,15 @@ D = 0.018
 R = D / 2
 
 
-def register_cap_flag(text: str) -> int | str | None:
-    """``--force-registers`` value: an integer, ``auto`` or ``none``."""
-    if text in ("auto", "none"):
-        return None if text == "none" else "auto"
+def option_value(text: str) -> int | str | None:
+    """A solver option's value on the command line: ``none`` -> None, an integer -> int, else the
+    text (``auto``; the solver checks what it gets and names a bad value)."""
+    if text == "none":
+        return None
     try:
         return int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"an integer, 'auto' or 'none', got {text!r}") from None
+        return text
 
 
 def add_solver_options(ap: argparse.ArgumentParser) -> None:
@@ -68,11 +69,11 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--wall-candidates", type=int, default=DEFAULT_WALL_CANDIDATES,
                     help="slots per sphere for the moving walls' triangles it may touch, kept between "
                          f"gatherings (0: query the moving walls' BVHs every step; default {DEFAULT_WALL_CANDIDATES})")
-    ap.add_argument("--force-registers", type=register_cap_flag, default="auto",
+    ap.add_argument("--force-registers", type=option_value, default="auto",
                     help="CUDA register cap per thread of the wall- and particle-force kernels: an integer, 'none' "
                          "(the compiler's choice) or 'auto' (default: 80 for models of more than 2 x SMs x 512 "
                          "spheres)")
-    ap.add_argument("--wear-lanes", type=lambda t: t if t == "auto" else int(t), default="auto",
+    ap.add_argument("--wear-lanes", type=option_value, default="auto",
                     help="copies of the wall wear accumulators (default auto: 32 on a GPU, 1 on the CPU)")
 
 
