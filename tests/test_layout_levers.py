@@ -81,7 +81,8 @@ def state_arrays(sim: wd.Simulation) -> dict[str, np.ndarray]:
     out = {k: v for k, v in sim.solver.export_state(s).items() if k != "sphere_x"}
     out["sphere_f"] = sim.solver.sphere_f.numpy()
     for f in sim.solver.wall_stats.FIELDS:
-        out[f"wear_{f}"] = getattr(sim.solver.wall_stats, f).numpy()
+        ws = sim.solver.wall_stats  # world-major over every wall (the one zero entry without walls)
+        out[f"wear_{f}"] = ws.per_triangle(f).ravel() if sim.model.walls else ws.summed(f).numpy()
     return out
 
 

@@ -175,7 +175,8 @@ def save_checkpoint(path: str | os.PathLike, sim) -> Path:
                                 origin=list(w.motion.origin), start=w.motion.start,
                                 stop=None if not np.isfinite(w.motion.stop) else w.motion.stop))
                for w in m.walls],
-        max_contacts=m.max_contacts, gravity=list(m.gravity), dt=sim.dt, steps=sim.steps)
+        max_contacts=m.max_contacts, gravity=list(m.gravity), dt=sim.dt, steps=sim.steps,
+        wear_layout="compact")  # WallStats: one entry per triangle for a wall of one world
     arrays = {f"host/{k}": v for k, v in m.host.items()}
     arrays.update({f"initial/{k}": v for k, v in m.initial.items()})
     # contact slots in the default layout whatever the solver's history_layout (loadable by any solver)
@@ -236,8 +237,9 @@ def _load_checkpoint(path: Path, data, device: str | None, model: Model | None, 
     fp = saved_fp if saved_fp is not None else model.fingerprint
     sim.solver.import_state(sim.state, state, fingerprint=fp)  # into the solver's slot layout
     sim.solver.import_state(sim._next, state, fingerprint=fp)
+    world_major = meta.get("wear_layout") != "compact"  # checkpoints before the compact layout
     for f in sim.solver.wall_stats.FIELDS:
-        sim.solver.wall_stats.load(f, data[f"wear/{f}"])
+        sim.solver.wall_stats.load(f, data[f"wear/{f}"], world_major=world_major)
     sim.steps = int(meta["steps"])
     return sim
 

@@ -110,7 +110,14 @@ class WallStats:
 
     ``energy_n``/``energy_t``: accumulated normal / tangential contact energy
     sum |F_n . v_n| dt, sum |F_t . v_t| dt [J]; ``impulse_n``/``impulse_t``: sum |F| dt [N s].
-    Arrays have shape (num_worlds * total_triangles,), index = world * T + triangle.
+
+    Layout (``entries`` per field): a wall present in every world (``world = -1``) has one entry
+    per triangle and world, the walls of one world (one drum per world at its own speed) one per
+    triangle, so the size grows with the number of walls, never with worlds x walls:
+    entry = ``wall_base[k] + world * wall_stride[k] + triangle``, the shared walls world-major first
+    (stride = their triangle count ``shared_triangles``), then each one-world wall (stride 0).
+    :meth:`per_triangle` gives any wall as (num_worlds, triangles) with zeros in the worlds it is
+    not in.
 
     The wall stage adds into ``lanes`` copies of every entry (sphere i into copy i % lanes), so
     that the thousands of spheres resting on one floor triangle do not queue their atomic adds on
@@ -124,17 +131,58 @@ class WallStats:
 
     def __init__(self, model: Model, lanes: int | str = "auto") -> None:
         self.model = model
-        self.entries = max(model.num_worlds * model.total_triangles, 1)
+        walls, worlds = model.walls, model.num_worlds
+        shared = [w.world == -1 for w in walls]
+        self.shared_triangles = int(sum(w.num_triangles for w, s in zip(walls, shared) if s))
+        base, shared_at, own_at = [], 0, worlds * self.shared_triangles
+        for w, s in zip(walls, shared):
+            base.append(shared_at if s else own_at)
+            shared_at, own_at = (shared_at + w.num_triangles, own_at) if s else (shared_at, own_at + w.num_triangles)
+        self.wall_base = np.asarray(base, dtype=np.int64)
+        self.wall_stride = np.asarray([self.shared_triangles if s else 0 for s in shared], dtype=np.int64)
+        self.entries = max(own_at, 1)
+        if self.entries >= 2 ** 31:
+            raise ConfigError(f"the wall accumulators need {self.entries} entries per field, more than a 32-bit "
+                              "index reaches: fewer worlds, or walls shared by every world")
         self.lanes = wear_lane_count(lanes, self.entries, model.device.is_cuda)
+        if self.entries * self.lanes >= 2 ** 31:
+            raise ConfigError(f"wear_lanes={self.lanes} x {self.entries} wall accumulator entries exceed a 32-bit "
+                              "index: choose fewer lanes ('auto' does)")
+        d = model.device
+        self.wall_base_array = wp.array(self.wall_base if len(walls) else np.zeros(1, np.int64), dtype=int, device=d)
+        self.wall_stride_array = wp.array(self.wall_stride if len(walls) else np.zeros(1, np.int64), dtype=int,
+                                          device=d)
         self._lane_arrays = {f: wp.zeros(self.entries * self.lanes, dtype=float, device=model.device)
                              for f in self.FIELDS}
+
+    def wall_entries(self, wall: int) -> np.ndarray:
+        """Entry of every (world, triangle) of one wall, shape (num_worlds, triangles); -1 in the
+        worlds the wall is not in."""
+        w = self.model.walls[wall]
+        worlds = np.arange(self.model.num_worlds)[:, None]
+        idx = self.wall_base[wall] + worlds * self.wall_stride[wall] + np.arange(w.num_triangles)[None, :]
+        if w.world != -1:
+            idx = np.where(worlds == w.world, idx, -1)
+        return idx
+
+    def world_major_index(self) -> np.ndarray:
+        """For each entry, its index in the layout of checkpoints before the compact one
+        (``world * total_triangles + tri_offset[wall] + triangle`` for every world and wall)."""
+        m = self.model
+        out = np.zeros(self.entries, dtype=np.int64)
+        for k, w in enumerate(m.walls):
+            idx = self.wall_entries(k)
+            world, tri = np.nonzero(idx >= 0)
+            out[idx[world, tri]] = world * m.total_triangles + w.tri_offset + tri
+        return out
 
     def lane_array(self, field: str) -> wp.array:
         """The accumulator copies of one field (``lanes * entries``; what the wall stage adds into)."""
         return self._lane_arrays[field]
 
     def summed(self, name: str) -> wp.array:
-        """One accumulator (``name`` in :attr:`FIELDS`), the copies summed: shape (num_worlds * total_triangles,)."""
+        """One accumulator (``name`` in :attr:`FIELDS`), the copies summed: shape (entries,) in the
+        layout of the class docstring (:meth:`per_triangle` gives it per wall and world)."""
         lanes = self._lane_arrays[name]
         if self.lanes == 1:
             return lanes
@@ -156,10 +204,18 @@ class WallStats:
         """Every copy of every field, shape (lanes, entries) (for a checkpoint)."""
         return {f: a.numpy().reshape(self.lanes, self.entries) for f, a in self._lane_arrays.items()}
 
-    def load(self, field: str, values: np.ndarray) -> None:
+    def load(self, field: str, values: np.ndarray, world_major: bool = False) -> None:
         """Set one field: ``values`` of shape (entries,) (into the first copy, the others zeroed) or
-        (lanes, entries) as :meth:`export_lanes` gave them (copied as they are)."""
+        (lanes, entries) as :meth:`export_lanes` gave them (copied as they are). ``world_major``:
+        the values are in the layout of checkpoints written before the compact one (one entry per
+        world and triangle of every wall); they are moved into this layout first."""
         values = np.asarray(values, dtype=np.float32)
+        if world_major:
+            m = self.model
+            size = max(m.num_worlds * m.total_triangles, 1)
+            if values.shape[-1:] != (size,):
+                raise ConfigError(f"wall accumulator {field}: {values.shape} values for {size} entries")
+            values = values[..., self.world_major_index()] if m.walls else values[..., :1]
         if values.shape == (self.lanes, self.entries):
             self._lane_arrays[field].assign(values.reshape(-1))
             return
@@ -170,13 +226,18 @@ class WallStats:
         self._lane_arrays[field].assign(full.reshape(-1))
 
     def per_triangle(self, field: str, wall: int | None = None) -> np.ndarray:
-        """(num_worlds, T_wall) array of one accumulator, for one wall or all walls."""
+        """(num_worlds, T_wall) array of one accumulator for one wall (zeros in the worlds it is not
+        in), or (num_worlds, total_triangles) of all walls in wall order."""
         m = self.model
-        a = getattr(self, field).numpy()[: m.num_worlds * m.total_triangles].reshape(m.num_worlds, m.total_triangles)
-        if wall is None:
-            return a
-        w = m.walls[wall]
-        return a[:, w.tri_offset: w.tri_offset + w.num_triangles]
+        a = getattr(self, field).numpy()
+        walls = range(len(m.walls)) if wall is None else [wall]
+        parts = []
+        for k in walls:
+            idx = self.wall_entries(k)
+            parts.append(np.where(idx >= 0, a[np.maximum(idx, 0)], 0.0).astype(a.dtype))
+        if not parts:
+            return np.zeros((m.num_worlds, 0), dtype=np.float32)
+        return parts[0] if wall is not None else np.concatenate(parts, axis=1)
 
     def per_component(self, field: str, wall: int) -> dict[str, np.ndarray]:
         """Sum of one accumulator over each labelled component of a wall, per world."""
@@ -622,7 +683,7 @@ class DEMSolver:
         ws = self.wall_stats
         wear.energy_n, wear.energy_t = ws.lane_array("energy_n"), ws.lane_array("energy_t")
         wear.impulse_n, wear.impulse_t = ws.lane_array("impulse_n"), ws.lane_array("impulse_t")
-        wear.triangles_per_world = m.total_triangles
+        wear.wall_base, wear.wall_stride = ws.wall_base_array, ws.wall_stride_array
         wear.entries, wear.lanes = ws.entries, ws.lanes
         forces = stages.SphereForces()
         forces.force = self.sphere_f

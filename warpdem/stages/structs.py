@@ -102,7 +102,8 @@ class MovingWallCandidates:
 @wp.struct
 class WearAccumulators:
     """Per-world, per-triangle wall accumulators (relative wear model, ``DEMSolver.wall_stats``);
-    entry ``world * triangles_per_world + tri_offset[wall] + triangle``, held in ``lanes`` copies
+    entry ``wall_base[wall] + world * wall_stride[wall] + triangle`` (stride 0 for a wall of one
+    world, :class:`warpdem.solver.WallStats`), held in ``lanes`` copies
     (lane ``i % lanes`` of sphere i at ``lane * entries + entry``: many spheres on one floor
     triangle then spread their atomic adds over several addresses; :class:`warpdem.solver.WallStats`
     sums the lanes when read)."""
@@ -111,8 +112,9 @@ class WearAccumulators:
     energy_t: wp.array(dtype=float)  # sum |F_t . v_t| dt [J]
     impulse_n: wp.array(dtype=float)  # sum |F_n| dt [N s]
     impulse_t: wp.array(dtype=float)  # sum |F_t| dt [N s]
-    triangles_per_world: int  # all walls' triangles (``Model.total_triangles``)
-    entries: int  # entries of one lane (num_worlds * triangles_per_world)
+    wall_base: wp.array(dtype=int)  # first entry of each wall
+    wall_stride: wp.array(dtype=int)  # entries between worlds of each wall (0: a wall of one world)
+    entries: int  # entries of one lane
     lanes: int  # copies of every entry (1: none)
 
 

@@ -427,7 +427,7 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
             if wp.static(roll_hist):
                 contacts.roll[e] = roll_new
             if wp.static(track_wear):
-                tri_entry = world * wear.triangles_per_world + walls.tri_offset[kw] + found.triangle[e]
+                tri_entry = wear.wall_base[kw] + world * wear.wall_stride[kw] + found.triangle[e]
                 accumulate_wear(wear, (i % wear.lanes) * wear.entries + tri_entry, fn, ft, c.v_rel, nrm, dt)
         forces.force[i] = f_sum
         forces.torque[i] = t_sum
