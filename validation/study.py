@@ -5,8 +5,13 @@ The DEM noise is measured on the base model's design and then used by every mode
 (``noise=`` of :func:`study_model`): one variance model for all versions is what makes their
 likelihoods, evidences and error histories comparable -- separate estimates from a few replicates
 each differ by 20-30 % by chance, and a badly wrong model's likelihood follows that, not the
-physics.  A version's own replicates are used only for observables whose base-model replicates
-never varied (e.g. a pile angle where the base model forms no pile).
+physics.  A version's own replicates are used for an observable whose base-model replicates
+never varied (e.g. a pile angle where the base model forms no pile), and for one where they
+reject the base's noise (:func:`version_noise`: a two-sided F test at level
+:data:`NOISE_TEST_ALPHA`): cohesive gravel at k ~ 3e5 J/m^3 scatters 5-8 times as much from fill
+to fill in the static angle as the frictional base model (5.7 against 0.70 deg, 5 and 5 degrees
+of freedom, p ~ 3e-4), and holding it to the base's scatter puts its confirmations "beyond
+2 sigma" for noise it really has.
 
 The confirmation runs the forward model at the surrogate's best fit with ``confirm_replicates``
 fresh fills; its residuals use the mean of those runs in place of the surrogate
@@ -27,6 +32,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
+from scipy import stats
 
 from .adequacy import Adequacy, judge_adequacy
 from .design import DesignData, design_replicates, design_size, evaluate_sets, pooled_noise_sd, run_design
@@ -204,6 +210,7 @@ class ModelStudy:
     check: SurrogateCheck | None = None
     refinement: tuple[RefinementWave, ...] = ()
     extra: dict[str, Any] = field(default_factory=dict)
+    noise_source: tuple[str, ...] = ()  # per observable: "base" (the base model's noise) or "own" (version_noise)
 
     @property
     def name(self) -> str:
@@ -243,6 +250,7 @@ class ModelStudy:
             "design": {"parameter_sets": self.design.X.tolist(), "responses": self.design.Y.tolist(),
                        "keys": list(self.design.keys), "waves": self.waves},
             "dem_noise_sd": self.noise_sd.tolist(), "dem_noise_dof": self.noise_dof.tolist(),
+            "dem_noise_source": list(self.noise_source),
             "fixed_sd": self.misfit.fixed_sd.tolist(),
             "surrogate_quality": [q.to_dict() for q in self.surrogates.quality],
             "best_fit": {"parameters": self.best_parameters, "chi2": self.best.chi2,
@@ -255,13 +263,36 @@ class ModelStudy:
         }
 
 
+#: level of the two-sided F test by which a version's own replicates overrule the base model's noise
+NOISE_TEST_ALPHA = 0.01
+
+
+def version_noise(own_sd: np.ndarray, own_dof: np.ndarray, base_sd: np.ndarray, base_dof: np.ndarray,
+                  alpha: float = NOISE_TEST_ALPHA) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Per observable, the fill-to-fill noise a model version is judged with: the base model's
+    (``base_sd`` with ``base_dof``), unless the base's replicates never varied (dof 0) or the
+    version's own replicates reject it: F = s_own^2 / s_base^2 outside the central 1 - ``alpha``
+    of the F(own_dof, base_dof) distribution (two-sided variance-ratio test, e.g. Montgomery &
+    Runger, Applied Statistics and Probability for Engineers, Sec. 10-5). Returns
+    ``(sd, dof, source)``, source ``"base"`` or ``"own"`` per observable."""
+    own_sd, own_dof, base_sd, base_dof = (np.asarray(a, float) for a in (own_sd, own_dof, base_sd, base_dof))
+    testable = (own_dof > 0) & (base_dof > 0) & (base_sd > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(testable, own_sd ** 2 / np.where(base_sd > 0, base_sd, 1.0) ** 2, 1.0)
+    lo = stats.f.ppf(alpha / 2, np.maximum(own_dof, 1), np.maximum(base_dof, 1))
+    hi = stats.f.isf(alpha / 2, np.maximum(own_dof, 1), np.maximum(base_dof, 1))
+    own = (base_dof <= 0) | (testable & ((ratio < lo) | (ratio > hi)))
+    return (np.where(own, own_sd, base_sd), np.where(own, own_dof, base_dof),
+            tuple("own" if o else "base" for o in own))
+
+
 def study_model(version: ModelVersion, observations: Observations, runner: ForwardRunner,
                 settings: DiagnosisSettings, seed: int, design: DesignData | None = None, waves: int = 1,
                 noise: tuple[np.ndarray, np.ndarray] | None = None) -> ModelStudy:
     """Design (unless given), noise, surrogates, scan, best fit, adequacy, evidence, confirmation.
 
-    noise : (sd, dof) per observable to use instead of this design's own estimate (module
-        docstring); observables with dof 0 there fall back to this design's estimate.
+    noise : the base model's (sd, dof) per observable, used instead of this design's own estimate
+        where :func:`version_noise` keeps it (module docstring).
     """
     t0 = time.perf_counter()
     keys = observations.keys
@@ -270,10 +301,9 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
         design = run_design(version, runner, keys, design_size(version, settings), settings.replicates, seed,
                             settings.replicated_fraction)
     noise_sd, noise_dof = pooled_noise_sd(design.Y, keys)
+    noise_source = ("own",) * len(keys)
     if noise is not None:
-        given_sd, given_dof = (np.asarray(a, float) for a in noise)
-        use = given_dof > 0
-        noise_sd, noise_dof = np.where(use, given_sd, noise_sd), np.where(use, given_dof, noise_dof)
+        noise_sd, noise_dof, noise_source = version_noise(noise_sd, noise_dof, *noise)
     misfit = Misfit.build(observations, noise_sd, settings.model_discrepancy, noise_dof)
     surrogates = fit_surrogates(space, design, noise_sd, settings.gp_restarts, settings.cv_folds, seed)
     scan = scan_box(surrogates, misfit, settings.scan_points, seed)
@@ -287,7 +317,7 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
     confirmation = confirm(version, best.x, runner, misfit, settings.confirm_replicates)
     check = check_surrogate(misfit, best, confirmation, settings)
     return ModelStudy(version, design, noise_sd, noise_dof, misfit, surrogates, scan, best, adequacy, evidence,
-                      confirmation, time.perf_counter() - t0, waves, check)
+                      confirmation, time.perf_counter() - t0, waves, check, noise_source=noise_source)
 
 
 def _maximin_subset(U: np.ndarray, n: int, first: np.ndarray) -> np.ndarray:
