@@ -397,6 +397,8 @@ def test_write_json_figures_and_report(tie, tmp_path):
     assert data["rounds"][0]["discrimination"]["recommended"] == "drum/60rpm/dynamic_angle"
     assert len(data["versions"][0]["design"]["parameter_sets"]) == 16
     html = paths["report"].read_text()
+    assert "noise of</th>" in html and html.count("<td>base model&#x27;s</td>") + html.count("<td>base model's</td>") > 0
+    assert data["versions"][1]["dem_noise_source"].count("base") > 0  # the added version kept the base's noise
     n_png = sum(1 for k in paths if k not in ("json", "error_history_json", "report"))
     assert html.count('src="data:image/png;base64,') == n_png
     assert html.index('id="verdict"') < html.index("Comparison at the best fit") < html.index("What to measure next") \

@@ -219,15 +219,18 @@ def _surrogate_section(result: "DiagnosisResult") -> Section:
     obs = result.observations
     qrows = []
     for v in result.versions:
-        for q, sd in zip(v.surrogates.quality, v.noise_sd):
+        sources = v.noise_source or ("own",) * len(v.noise_sd)
+        for q, sd, src in zip(v.surrogates.quality, v.noise_sd, sources):
             o = obs[obs.index(q.key)]
-            qrows.append([v.name, o.name, o.unit, q.n_train, q.r2, q.rmse, q.coverage_2sd, sd])
+            qrows.append([v.name, o.name, o.unit, q.n_train, q.r2, q.rmse, q.coverage_2sd, sd,
+                          "base model's" if src == "base" else "own"])
     return Section("Surrogates and DEM noise", [
         "One Gaussian process per observable (Matern 5/2 with one length scale per parameter + white noise); "
         "quality from k-fold cross-validation; the DEM noise is the pooled fill-to-fill sd over the design's "
-        "replicates.",
+        "replicates. Every version is judged with the base model's noise, so that their likelihoods compare, "
+        "except where its own replicates reject it (two-sided F test at level 0.01: \"own\").",
         Table(["model version", "observable", "unit", "design sets", "CV R²", "CV RMSE", "CV coverage of ±2 sd",
-               "DEM noise sd"], qrows),
+               "DEM noise sd", "noise of"], qrows),
         *_refinement_blocks(result, result.settings.within_sigma, result.settings.cutoff),
     ])
 
