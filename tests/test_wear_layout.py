@@ -56,6 +56,25 @@ def test_a_worlds_drum_wears_only_in_that_world():
         assert tri.shape == (2, sim.model.walls[k].num_triangles)
         assert tri[k].sum() > 0 and not tri[1 - k].any()
     np.testing.assert_allclose(ws.per_triangle("energy_n").sum(), ws.energy_n.numpy().sum(), rtol=1e-6)
+    values = ws.impulse_n.numpy()  # one wall's triangles in a world or summed over worlds (the VTK cells)
+    for k in range(2):
+        full = ws.per_triangle("impulse_n", k)
+        np.testing.assert_array_equal(ws.wall_triangles(values, k), full.sum(axis=0))
+        for world in range(2):
+            np.testing.assert_array_equal(ws.wall_triangles(values, k, world), full[world])
+
+
+def test_a_shared_wall_reads_per_world_and_summed():
+    model = drums_per_world(3)
+    sim = wd.Simulation(model, 1e-5, use_graph=False)
+    ws = sim.solver.wall_stats
+    floor = len(model.walls) - 1
+    values = np.arange(ws.entries, dtype=np.float32)  # every entry distinct
+    idx = ws.wall_entries(floor)
+    assert (idx >= 0).all()  # a wall of every world has an entry in each
+    for world in range(3):
+        np.testing.assert_array_equal(ws.wall_triangles(values, floor, world), values[idx[world]])
+    np.testing.assert_array_equal(ws.wall_triangles(values, floor), values[idx].sum(axis=0))
 
 
 def test_a_checkpoint_of_the_old_world_major_layout_still_loads(tmp_path):

@@ -70,6 +70,8 @@ def wall_surfaces(sim, world: int | None = None) -> list[tuple[str, object]]:
     import pyvista as pv
 
     m: Model = sim.model
+    stats = sim.solver.wall_stats
+    sums = {field: stats.summed(field).numpy() for field in stats.FIELDS}  # one copy to the host per field
     out = []
     for wi, w in enumerate(m.walls):
         if world is not None and w.world not in (-1, world):
@@ -77,9 +79,8 @@ def wall_surfaces(sim, world: int | None = None) -> list[tuple[str, object]]:
         pts = w.points_at(sim.time)
         faces = np.hstack([np.full((w.num_triangles, 1), 3), w.faces]).ravel()
         mesh = pv.PolyData(pts, faces)
-        for field in sim.solver.wall_stats.FIELDS:
-            a = sim.solver.wall_stats.per_triangle(field, wi)
-            mesh.cell_data[field] = a[world] if world is not None else a.sum(axis=0)
+        for field in stats.FIELDS:
+            mesh.cell_data[field] = stats.wall_triangles(sums[field], wi, world)
         if w.triangle_labels is not None:
             mesh.cell_data["component"] = w.triangle_labels
         out.append((w.name, mesh))

@@ -239,6 +239,21 @@ class WallStats:
             return np.zeros((m.num_worlds, 0), dtype=np.float32)
         return parts[0] if wall is not None else np.concatenate(parts, axis=1)
 
+    def wall_triangles(self, values: np.ndarray, wall: int, world: int | None = None) -> np.ndarray:
+        """One wall's triangles, shape (T_wall,), from ``values`` (a field as :meth:`summed` gives it,
+        on the host): in ``world``, or summed over every world (None). Reads only that wall's
+        entries, so a model of thousands of one-world walls writes its VTK frames without building
+        a worlds x triangles array per wall."""
+        w = self.model.walls[wall]
+        t = np.arange(w.num_triangles)
+        base, stride = int(self.wall_base[wall]), int(self.wall_stride[wall])
+        if w.world != -1:  # one world: its entries only
+            inside = world is None or world == w.world
+            return values[base + t] if inside else np.zeros(w.num_triangles, dtype=values.dtype)
+        if world is not None:
+            return values[base + world * stride + t]
+        return values[base + np.arange(self.model.num_worlds)[:, None] * stride + t[None, :]].sum(axis=0)
+
     def per_component(self, field: str, wall: int) -> dict[str, np.ndarray]:
         """Sum of one accumulator over each labelled component of a wall, per world."""
         w = self.model.walls[wall]
