@@ -10,10 +10,11 @@
 #
 # Run it again until it prints "four diagnoses finished" (every finished world is in OUT's cache;
 # stop it yourself with CHUNK_S, default 560 s). Each diagnosis reads only OUT/lab_<case>.yaml;
-# score afterwards with `python benchmarks/score_hidden_effects.py OUT` (the only reader of the
-# truth files, copied beside them). Env: SRC (default docs/results/hidden_effects_paper), DEVICE
+# once all have finished, benchmarks/score_hidden_effects.py (the only reader of the truth files,
+# copied beside them) writes OUT/score.md and score.json. Env: SRC (default docs/results/hidden_effects_paper), DEVICE
 # (default cuda), PYTHON (default python3), CASES (default "base rolling cohesion shape"), EXPORT (a
-# folder to copy each case's diagnosis.json, report.html, the log and the cache to).
+# folder to copy each case's diagnosis.json and report.html, the labs, truths, configs, log, cache and
+# score to).
 set -u
 out=${1:?usage: four_cases_from_cache.sh OUT}
 py=${PYTHON:-python3}
@@ -59,9 +60,13 @@ log=$out/diagnose_run$((n + 1)).log
 rc=$?
 grep -E '^DEM: [a-z]+: [0-9]+ world' "$log" | sed 's/^/    /'
 echo "{\"run\": $((n + 1)), \"rc\": $rc, \"wall_s\": $(( $(date +%s) - t0 )), \"date\": \"$(date -u +%FT%TZ)\"}" >> "$out/runs.jsonl"
+if [ "$rc" -eq 0 ]; then  # the truths are read only now, after every diagnosis has finished
+  $py "$repo/benchmarks/score_hidden_effects.py" "$out" --cases $cases --json "$out/score.json" --markdown "$out/score.md"
+fi
 if [ -n "${EXPORT:-}" ]; then
   mkdir -p "$EXPORT"
-  cp "$out/dem_cache.jsonl" "$out/runs.jsonl" "$log" "$EXPORT/"
+  cp "$out/dem_cache.jsonl" "$out/runs.jsonl" "$log" "$out"/lab_*.yaml "$out"/truth_*.json "$out"/diagnose_*.yaml "$EXPORT/"
+  cp "$out/score.json" "$out/score.md" "$EXPORT/" 2>/dev/null
   for c in $cases; do
     [ -d "$out/diagnosis_$c" ] || continue
     mkdir -p "$EXPORT/diagnosis_$c"
