@@ -66,7 +66,7 @@ from .observables import Observable, Observations
 from .pooled import run_as_workers
 from .ranking import CandidateResult, candidate_sentence, effect_signature, rank_candidates
 from .settings import DiagnosisSettings
-from .study import ModelStudy, refine_study, study_model
+from .study import ModelStudy, confirm_study, refine_study, study_model
 
 __all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs", "run_planned_designs",
            "PlannedRun", "version_name"]
@@ -325,16 +325,21 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
     """Study every candidate on top of ``current``, rank, detect a tie and try to resolve it.
     ``designs`` : candidates' designs already run (by effect name; the up-front step)."""
     labels = [o.name for o in obs]
-    z_now = _residual(current)
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
-    # the candidates' studies are independent: with a pooled forward model their DEM requests
-    # share launches (validation.pooled); otherwise they run one after another
+    # the candidates' studies (and the current model's confirmation, when still to run) are
+    # independent: with a pooled forward model their DEM requests share launches
+    # (validation.pooled); otherwise they run one after another, the confirmation first
     _say(f"studying {len(candidates)} candidate(s): {', '.join(e.name for e in candidates)}")
-    studies = run_as_workers(runner.model, [
+    pending = [lambda: confirm_study(current, runner, settings)] if current.confirmation is None else []
+    done = run_as_workers(runner.model, pending + [
         (lambda i=i, eff=eff: study_model(current.version.with_effect(eff), obs, runner, settings,
                                           _candidate_seed(seed, i), design=(designs or {}).get(eff.name),
                                           noise=noise))
         for i, eff in enumerate(candidates)])
+    if pending:
+        current = done.pop(0)
+    studies = done
+    z_now = _residual(current)
     results = []
     for eff, st in zip(candidates, studies):
         log_b = st.evidence.log_evidence - current.evidence.log_evidence
@@ -442,7 +447,12 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     if "seconds" in up_front:
         seconds["designs_up_front"] = up_front["seconds"]
     _say("studying the base model")
-    base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed, design=designs.get("base"))
+    base = study_model(ModelVersion(base_space), obs, runner, settings, settings.seed, design=designs.get("base"),
+                       confirm_now=False)
+    # an inadequate base model is ranked at once: its DEM confirmation then runs beside the
+    # candidates' studies (their worlds share launches), otherwise now
+    if base.adequacy.adequate or not cands or max(settings.max_added_effects, len(settings.add)) == 0:
+        base = confirm_study(base, runner, settings)
     if base.adequacy.adequate and not (base.check.agrees or base.check.dem_within) and settings.max_refine_waves > 1:
         _say(f"the base model's surrogate disagrees with the DEM at its best fit "
              f"({', '.join(base.check.disagreeing)}): refining")
@@ -452,7 +462,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     _say(f"base model studied in {base.seconds:.0f} s: {'adequate' if base.adequacy.adequate else 'inadequate'}")
     base_noise = (base.noise_sd, base.noise_dof)  # one variance model for every version (validation.study)
     versions = [base]
-    history = ErrorHistory((_errors(base, settings),))
+    history = ErrorHistory((_errors(base, settings),)) if base.confirmation is not None else None
     rounds: list[RankingRound] = []
     remaining = list(cands)
     forced = list(settings.add)
@@ -466,6 +476,9 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, _round_seed(settings, step),
                           base_noise, designs if step == 0 else None)
         seconds["ranking"] += time.perf_counter() - t0
+        if history is None:  # the base model's confirmation ran in the round
+            versions[0] = base = rnd.current
+            history = ErrorHistory((_errors(base, settings),))
         top = rnd.top
         if forced:
             chosen, reason = forced.pop(0), "added as requested (settings.add)"

@@ -204,7 +204,7 @@ class ModelStudy:
     best: BestFit
     adequacy: Adequacy
     evidence: Evidence
-    confirmation: Confirmation
+    confirmation: Confirmation | None  # None until :func:`confirm_study` ran (``study_model(confirm_now=False)``)
     seconds: float
     waves: int = 1
     check: SurrogateCheck | None = None
@@ -288,11 +288,13 @@ def version_noise(own_sd: np.ndarray, own_dof: np.ndarray, base_sd: np.ndarray, 
 
 def study_model(version: ModelVersion, observations: Observations, runner: ForwardRunner,
                 settings: DiagnosisSettings, seed: int, design: DesignData | None = None, waves: int = 1,
-                noise: tuple[np.ndarray, np.ndarray] | None = None) -> ModelStudy:
+                noise: tuple[np.ndarray, np.ndarray] | None = None, confirm_now: bool = True) -> ModelStudy:
     """Design (unless given), noise, surrogates, scan, best fit, adequacy, evidence, confirmation.
 
     noise : the base model's (sd, dof) per observable, used instead of this design's own estimate
         where :func:`version_noise` keeps it (module docstring).
+    confirm_now : False leaves the DEM confirmation (and the surrogate check) to :func:`confirm_study`,
+        so that a caller can run it beside other work (its DEM worlds then share launches).
     """
     t0 = time.perf_counter()
     keys = observations.keys
@@ -314,10 +316,18 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
         return misfit.log_likelihood(*surrogates.predict_unit(U))
 
     evidence = estimate_log_evidence(log_likelihood, best.u, settings.evidence_samples, seed)
-    confirmation = confirm(version, best.x, runner, misfit, settings.confirm_replicates)
-    check = check_surrogate(misfit, best, confirmation, settings)
-    return ModelStudy(version, design, noise_sd, noise_dof, misfit, surrogates, scan, best, adequacy, evidence,
-                      confirmation, time.perf_counter() - t0, waves, check, noise_source=noise_source)
+    study = ModelStudy(version, design, noise_sd, noise_dof, misfit, surrogates, scan, best, adequacy, evidence,
+                       None, time.perf_counter() - t0, waves, None, noise_source=noise_source)
+    return confirm_study(study, runner, settings) if confirm_now else study
+
+
+def confirm_study(study: ModelStudy, runner: ForwardRunner, settings: DiagnosisSettings) -> ModelStudy:
+    """``study`` with its DEM confirmation at the best fit and the surrogate check there (the
+    last step of :func:`study_model`); its ``seconds`` include them."""
+    t0 = time.perf_counter()
+    confirmation = confirm(study.version, study.best.x, runner, study.misfit, settings.confirm_replicates)
+    check = check_surrogate(study.misfit, study.best, confirmation, settings)
+    return replace(study, confirmation=confirmation, check=check, seconds=study.seconds + time.perf_counter() - t0)
 
 
 def _maximin_subset(U: np.ndarray, n: int, first: np.ndarray) -> np.ndarray:
