@@ -230,7 +230,8 @@ class CachedTieModel(CachedAnalyticModel):
 
 def test_the_tied_candidates_forecasts_share_one_launch():
     """When candidates tie, their runs at the proposed conditions are requests of one merged call
-    (one launch per experiment on the GPU), not one launch per candidate."""
+    (one launch per experiment on the GPU), not one launch per candidate; the chosen candidate's
+    recalibration, which does not wait for them, joins that call."""
     from test_diagnosis_logic import TRUTHS as T
 
     obs = lab_observables(T["rolling_resistance"], ("rolling_resistance",), shape_like_rolling=True)
@@ -240,5 +241,8 @@ def test_the_tied_candidates_forecasts_share_one_launch():
     disc = result.rounds[0].discrimination
     assert disc is not None and len(disc.candidates) == 2 and disc.forecasts
     forecast_keys = {p.key for p in inner.proposals()}
-    merged = [m for m in pool.merges if m["keys"] == len(forecast_keys) and m["requests"] == 2]
-    assert merged, pool.merges  # both candidates' forecasts in one call
+    # both candidates' forecasts (the proposed conditions' keys) and the recalibration's first wave
+    # (the measured observables' keys) in one call
+    merged = [m for m in pool.merges if m["keys"] == len(obs) + len(forecast_keys) and m["requests"] == 3]
+    assert merged, pool.merges
+    assert _numbers(result) == _numbers(diagnose(obs, BASE, [ROLLING, SHAPE], CachedTieModel(), FAST))  # as alone

@@ -50,7 +50,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -320,9 +320,11 @@ def _up_front_choice(settings: DiagnosisSettings, model: ForwardModel) -> tuple[
 
 
 def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs: Observations, runner: ForwardRunner,
-                model: ForwardModel, settings: DiagnosisSettings, seed: int,
-                noise: tuple[np.ndarray, np.ndarray], designs: dict[str, DesignData] | None = None) -> RankingRound:
-    """Study every candidate on top of ``current``, rank, detect a tie and try to resolve it.
+                settings: DiagnosisSettings, seed: int, noise: tuple[np.ndarray, np.ndarray],
+                designs: dict[str, DesignData] | None = None) -> RankingRound:
+    """Study every candidate on top of ``current`` (confirming ``current`` beside them when it is
+    not yet), rank, and name the candidates tied with the top one (their forecasts,
+    :func:`_discriminate_tie`, run beside the recalibration).
     ``designs`` : candidates' designs already run (by effect name; the up-front step)."""
     labels = [o.name for o in obs]
     current_words = "base model" if not current.version.effects else f"model '{current.name}'"
@@ -353,13 +355,17 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
                  if top.log_evidence - c.log_evidence
                  < max(settings.tie_log_bayes,
                        2.0 * math.hypot(top.study.evidence.standard_error, c.study.evidence.standard_error)))
-    disc = None
-    if len(tied) >= 2:
-        by_name = {c.name: c for c in ranked}
-        disc = discriminate({n: by_name[n].study for n in tied}, {n: by_name[n].effect.words for n in tied},
-                            tuple(model.proposals()), runner, settings.replicates, settings.separation_sigma,
-                            seed=seed, replicated_fraction=settings.replicated_fraction)
-    return RankingRound(current, ranked, tied, disc, None, "")
+    return RankingRound(current, ranked, tied, None, None, "")
+
+
+def _discriminate_tie(rnd: RankingRound, model: ForwardModel, runner: ForwardRunner, settings: DiagnosisSettings,
+                      seed: int) -> Discrimination:
+    """The forecasts of the tied candidates of ``rnd`` at the proposed conditions
+    (:func:`validation.discrimination.discriminate`)."""
+    by_name = {c.name: c for c in rnd.candidates}
+    return discriminate({n: by_name[n].study for n in rnd.tied}, {n: by_name[n].effect.words for n in rnd.tied},
+                        tuple(model.proposals()), runner, settings.replicates, settings.separation_sigma,
+                        seed=seed, replicated_fraction=settings.replicated_fraction)
 
 
 def _break_tie(rnd: RankingRound, tie_log_bayes: float) -> tuple[str, str]:
@@ -429,6 +435,17 @@ def diagnose(observables: Sequence[Observable] | Observations, base_space: Param
         return _diagnose(obs, base_space, cands, forward_model, settings)
 
 
+def _timed(seconds: dict[str, float], key: str, job: Callable[[], Any]) -> Callable[[], Any]:
+    """``job`` that adds its own wall time to ``seconds[key]`` (jobs running side by side each count theirs)."""
+    def run() -> Any:
+        t0 = time.perf_counter()
+        try:
+            return job()
+        finally:
+            seconds[key] += time.perf_counter() - t0
+    return run
+
+
 def _say(msg: str) -> None:
     """One progress line on stderr (the report and JSON carry the results); a diagnosis running
     beside others in one process (``warpdem diagnose a.yaml b.yaml``) names its config."""
@@ -473,8 +490,8 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         if not remaining or not (inadequate or forced or settings.rank_when_adequate):
             break
         t0 = time.perf_counter()
-        rnd = _rank_round(current, remaining, obs, runner, forward_model, settings, _round_seed(settings, step),
-                          base_noise, designs if step == 0 else None)
+        rnd = _rank_round(current, remaining, obs, runner, settings, _round_seed(settings, step), base_noise,
+                          designs if step == 0 else None)
         seconds["ranking"] += time.perf_counter() - t0
         if history is None:  # the base model's confirmation ran in the round
             versions[0] = base = rnd.current
@@ -492,16 +509,24 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
             chosen, reason = _break_tie(rnd, settings.tie_log_bayes)
         else:
             chosen, reason = top.name, f"{top.effect.words} has the highest evidence (ln B = {top.log_bayes:+.1f})"
-        rnd = RankingRound(rnd.current, rnd.candidates, rnd.tied, rnd.discrimination, chosen, reason)
+        # the tie's forecasts and the chosen effect's recalibration do not depend on each other: with a
+        # pooled forward model their DEM worlds share launches; otherwise the forecasts run first
+        jobs: list[Callable[[], Any]] = []
+        if len(rnd.tied) >= 2:
+            jobs.append(_timed(seconds, "ranking", lambda rnd=rnd, step=step: _discriminate_tie(
+                rnd, forward_model, runner, settings, _round_seed(settings, step))))
+        if chosen is not None:
+            pick = next(c for c in rnd.candidates if c.name == chosen)
+            _say(f"recalibrating with '{chosen}' added")
+            jobs.append(_timed(seconds, "recalibration", lambda pick=pick, step=step: refine_study(
+                pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise, say=_say)))
+        done = run_as_workers(runner.model, jobs)
+        disc = done.pop(0) if len(rnd.tied) >= 2 else None
+        rnd = RankingRound(rnd.current, rnd.candidates, rnd.tied, disc, chosen, reason)
         rounds.append(rnd)
         if chosen is None:
             break
-        pick = next(c for c in rnd.candidates if c.name == chosen)
-        t0 = time.perf_counter()
-        _say(f"recalibrating with '{chosen}' added")
-        recal = refine_study(pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise,
-                             say=_say)
-        seconds["recalibration"] += time.perf_counter() - t0
+        recal = done[0]
         versions.append(recal)
         history = history.appended(_errors(recal, settings))
         remaining = [c for c in remaining if c.name != chosen]
