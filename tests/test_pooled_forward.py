@@ -65,12 +65,15 @@ class CachedAnalyticModel(ForwardModel):
 
 
 def _numbers(result):
-    """Every number of a diagnosis except wall times."""
+    """Every number of a diagnosis except wall times, floats to 10 significant digits (studies running
+    beside each other in threads may sum in another order in BLAS: differences of 1e-16)."""
     def strip(x):
         if isinstance(x, dict):
             return {k: strip(v) for k, v in x.items() if k != "seconds"}
         if isinstance(x, list):
             return [strip(v) for v in x]
+        if isinstance(x, float) and x == x:  # NaN stays the same object (containers compare it by identity)
+            return float(f"{x:.10g}")
         return x
     d = result.to_dict()
     return strip({k: d[k] for k in ("verdict", "versions", "rounds", "error_history", "next_steps")}), result.headline

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from validation import ForwardRunner, Misfit
+from validation import ForwardRunner, Misfit, diagnose
 from validation.effects import ModelVersion
 from validation.observables import Observations
 from validation.study import NOISE_TEST_ALPHA, study_model, version_noise
@@ -69,3 +69,11 @@ def test_a_version_that_scatters_more_is_judged_with_its_own_noise():
     held_to_base = Misfit.build(obs, np.where(np.arange(len(KEYS)) == j, base.noise_sd, study.noise_sd))
     z_base = held_to_base.z(c.mean, held_to_base.dem_noise_sd / np.sqrt(c.n_ok))[j]
     assert abs(z_base) > 2 * abs(c.z[j]) > 0  # the base's noise would have called the same runs far off
+
+
+def test_the_verdict_says_where_a_version_keeps_its_own_noise():
+    obs = lab_observables(TRUTHS["cohesion"], ("cohesion",))
+    result = diagnose(obs, BASE, [COHESION], ScatteringCohesion(1), FAST)
+    said = [d for d in result.details if "scatters differently" in d]
+    assert len(said) == 1 and "static angle A" in said[0] and "base + cohesion" in said[0]
+    assert "pile angle" not in said[0]  # the base model formed no pile: nothing to differ from
