@@ -71,9 +71,11 @@ def test_a_version_that_scatters_more_is_judged_with_its_own_noise():
     assert abs(z_base) > 2 * abs(c.z[j]) > 0  # the base's noise would have called the same runs far off
 
 
-def test_the_verdict_says_where_a_version_keeps_its_own_noise():
+def test_the_verdict_and_the_report_say_where_a_version_keeps_its_own_noise(tmp_path):
     obs = lab_observables(TRUTHS["cohesion"], ("cohesion",))
     result = diagnose(obs, BASE, [COHESION], ScatteringCohesion(1), FAST)
     said = [d for d in result.details if "scatters differently" in d]
     assert len(said) == 1 and "static angle A" in said[0] and "base + cohesion" in said[0]
     assert "pile angle" not in said[0]  # the base model formed no pile: nothing to differ from
+    html = result.write(tmp_path / "diag")["report"].read_text()
+    assert html.count("scatters differently from fill to fill") == 1  # in the surrogates and DEM noise section

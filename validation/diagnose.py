@@ -66,7 +66,7 @@ from .observables import Observable, Observations
 from .pooled import run_as_workers
 from .ranking import CandidateResult, candidate_sentence, effect_signature, rank_candidates
 from .settings import DiagnosisSettings
-from .study import ModelStudy, confirm_study, refine_study, study_model
+from .study import ModelStudy, confirm_study, own_noise_sentence, refine_study, study_model
 
 __all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs", "run_planned_designs",
            "PlannedRun", "version_name"]
@@ -579,22 +579,6 @@ def _designs_used(record: dict[str, Any], used: Sequence[str]) -> None:
              f"{record['worlds_run']} were; designs_up_front: {str(record['setting']).lower()})")
 
 
-def _own_noise_keys(version: ModelStudy, base: ModelStudy) -> list[int]:
-    """Observables for which ``version`` is judged with its own DEM noise although the base model's
-    replicates measured one (validation.study.version_noise)."""
-    return [j for j, src in enumerate(version.noise_source) if src == "own" and base.noise_dof[j] > 0]
-
-
-def _own_noise_sentence(version: ModelStudy, base: ModelStudy) -> str:
-    """One sentence: where ``version`` scatters differently from fill to fill than the base model."""
-    obs = version.misfit.observations
-    parts = [f"{obs[j].name}: {version.noise_sd[j]:.2g} against {base.noise_sd[j]:.2g} {obs[j].unit}"
-             for j in _own_noise_keys(version, base)]
-    return (f"The model '{version.name}' scatters differently from fill to fill than the base model (DEM noise "
-            f"sd, {'; '.join(parts)}; a two-sided F test at level 0.01 rejects the base's), so it is judged with "
-            "its own noise there.")
-
-
 def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: ErrorHistory,
                settings: DiagnosisSettings) -> tuple[bool, str, list[str], list[str]]:
     """Verdict headline, details and next steps in words."""
@@ -676,7 +660,7 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
                              "differently (faster or looser flow, a free pile).")
         if r.chosen is not None:
             details.append(f"Chosen: {r.reason}.")
-    details.extend(_own_noise_sentence(v, base) for v in versions[1:] if _own_noise_keys(v, base))
+    details.extend(filter(None, (own_noise_sentence(v, base) for v in versions[1:])))
     if len(history.versions) > 1:
         details.append(f"Error history (DEM): chi2 per observable {first.chi2_per_observable:.2f} -> "
                        f"{last.chi2_per_observable:.2f}; largest |z| {first.max_abs_z:.1f} -> {last.max_abs_z:.1f}.")

@@ -14,7 +14,7 @@ import numpy as np
 from calibration.reporting import Cell, Figure, Report, Section, Table, Verdict
 
 from .evidence import bayes_factor_words
-from .study import STALL_FRACTION
+from .study import STALL_FRACTION, own_noise_sentence
 
 if TYPE_CHECKING:  # pragma: no cover
     from .diagnose import DiagnosisResult
@@ -229,6 +229,7 @@ def _surrogate_section(result: "DiagnosisResult") -> Section:
         "quality from k-fold cross-validation; the DEM noise is the pooled fill-to-fill sd over the design's "
         "replicates. Every version is judged with the base model's noise, so that their likelihoods compare, "
         "except where its own replicates reject it (two-sided F test at level 0.01: \"own\").",
+        *filter(None, (own_noise_sentence(v, result.base) for v in result.versions[1:])),
         Table(["model version", "observable", "unit", "design sets", "CV R²", "CV RMSE", "CV coverage of ±2 sd",
                "DEM noise sd", "noise of"], qrows),
         *_refinement_blocks(result, result.settings.within_sigma, result.settings.cutoff),

@@ -286,6 +286,20 @@ def version_noise(own_sd: np.ndarray, own_dof: np.ndarray, base_sd: np.ndarray, 
             tuple("own" if o else "base" for o in own))
 
 
+def own_noise_sentence(version: "ModelStudy", base: "ModelStudy") -> str | None:
+    """Where ``version`` is judged with its own DEM noise although the base model's replicates
+    measured one (:func:`version_noise` rejected the base's), in one sentence with both sds; None
+    where it keeps the base's."""
+    obs = version.misfit.observations
+    parts = [f"{obs[j].name}: {version.noise_sd[j]:.2g} against {base.noise_sd[j]:.2g} {obs[j].unit}"
+             for j, src in enumerate(version.noise_source) if src == "own" and base.noise_dof[j] > 0]
+    if not parts:
+        return None
+    return (f"The model '{version.name}' scatters differently from fill to fill than the base model (DEM noise "
+            f"sd, {'; '.join(parts)}; a two-sided F test at level {NOISE_TEST_ALPHA:g} rejects the base's), so it "
+            "is judged with its own noise there.")
+
+
 def study_model(version: ModelVersion, observations: Observations, runner: ForwardRunner,
                 settings: DiagnosisSettings, seed: int, design: DesignData | None = None, waves: int = 1,
                 noise: tuple[np.ndarray, np.ndarray] | None = None, confirm_now: bool = True) -> ModelStudy:
