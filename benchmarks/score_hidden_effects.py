@@ -68,6 +68,8 @@ def score_case(folder: Path, case: str) -> dict[str, Any]:
     row["found"] = row["top"] == hidden if hidden else verdict["base_adequate"] and not row["added"]
     final = versions[-1]
     row["final_within_2_sigma"] = final["n_within"] == final["n_observables"]
+    conf = diag["versions"][-1].get("confirmation") or {}
+    row["local_noise"] = [o["key"] for o, src in zip(diag["observables"], conf.get("noise_source") or []) if src == "local"]
     true_p = truth["parameters"]
     best = diag["versions"][-1].get("best_fit") or {}
     best_x = best.get("parameters") if isinstance(best, dict) and "parameters" in best else best
@@ -93,7 +95,9 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         z = " -> ".join(f"{v['max_abs_z']:.1f}" for v in h)
         out.append(f"| {r['case']} ({r['hidden'] or 'none'}) | {first} | {second} | "
                    f"{'yes' if r['found'] else 'NO'} | {', '.join(r['added']) or '-'} | {chi} | {z} | "
-                   f"{'yes' if r['final_within_2_sigma'] else 'no'} |")
+                   f"{'yes' if r['final_within_2_sigma'] else 'no'}"
+                   + (f" ({len(r['local_noise'])} judged with their own fills' scatter)" if r.get("local_noise") else "")
+                   + " |")
     out.append("")
     for r in rows:
         if r.get("parameters"):

@@ -67,6 +67,7 @@ class DiagnosisSection(_Strict):
     replicates: int = Field(2, ge=2)
     replicated_fraction: float = Field(1.0, gt=0, le=1)
     confirm_replicates: int = Field(3, ge=1)
+    confirm_extra_replicates: int = Field(2, ge=0)
     refine_points: int = Field(8, ge=0)
     max_refine_waves: int = Field(5, ge=0)
     scan_points: int = Field(2 ** 14, ge=64)

@@ -66,7 +66,7 @@ from .observables import Observable, Observations
 from .pooled import run_as_workers
 from .ranking import CandidateResult, candidate_sentence, effect_signature, rank_candidates
 from .settings import DiagnosisSettings
-from .study import ModelStudy, confirm_study, own_noise_sentence, refine_study, study_model
+from .study import ModelStudy, confirm_study, local_noise_sentence, own_noise_sentence, refine_study, study_model
 
 __all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs", "run_planned_designs",
            "PlannedRun", "version_name"]
@@ -622,6 +622,11 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         headline = (f"{lead}with {added} added, {state} (DEM at the recalibrated best fit, largest |z| "
                     f"{last.max_abs_z:.1f})")
         headline = headline[0].upper() + headline[1:]
+        noisy = final.confirmation.local_noise if final.confirmation is not None else ()
+        if noisy:
+            obs = final.misfit.observations
+            headline += (f"; the {', '.join(obs[j].name for j in noisy)} judged with the scatter of its own fills there, "
+                         "which is large")
         if unsettled:
             headline += (f"; the surrogate still disagrees with the DEM at that best fit for {', '.join(unsettled)}"
                          f"{waves_words}, so a better fit may exist: this is not yet a failure of {added}")
@@ -661,6 +666,7 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         if r.chosen is not None:
             details.append(f"Chosen: {r.reason}.")
     details.extend(filter(None, (own_noise_sentence(v, base) for v in versions[1:])))
+    details.extend(filter(None, (local_noise_sentence(v) for v in versions)))
     if len(history.versions) > 1:
         details.append(f"Error history (DEM): chi2 per observable {first.chi2_per_observable:.2f} -> "
                        f"{last.chi2_per_observable:.2f}; largest |z| {first.max_abs_z:.1f} -> {last.max_abs_z:.1f}.")

@@ -14,7 +14,7 @@ import numpy as np
 from calibration.reporting import Cell, Figure, Report, Section, Table, Verdict
 
 from .evidence import bayes_factor_words
-from .study import STALL_FRACTION, own_noise_sentence
+from .study import STALL_FRACTION, local_noise_sentence, own_noise_sentence
 
 if TYPE_CHECKING:  # pragma: no cover
     from .diagnose import DiagnosisResult
@@ -114,8 +114,10 @@ def _comparison_section(result: "DiagnosisResult", figure_paths: Mapping[str, os
         rows.append(row)
     return Section("Comparison at the best fit", [
         "Each model version is calibrated on all observables at once and then re-simulated at its best fit "
-        f"({s.confirm_replicates} fresh fills). z = (measured − simulated) / σ, with σ² = SE² + s_DEM²/n + "
+        f"({s.confirm_replicates} fresh fills; {s.confirm_extra_replicates} more where they scatter beyond the pooled "
+        "noise). z = (measured − simulated) / σ, with σ² = SE² + s_DEM²/n + "
         "Var(simulated mean) (history matching, Vernon et al. 2010). Green: |z| ≤ 2, amber: ≤ 3, red: beyond.",
+        *filter(None, (local_noise_sentence(v) for v in result.versions)),
         Table(cols, rows, caption="Measured against simulated"),
         *_fig(figure_paths, "comparison", "Measured (black, mean ± standard error) and simulated (DEM mean ± "
                                           "spread over fills) values per experiment."),

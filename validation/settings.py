@@ -23,6 +23,10 @@ class DiagnosisSettings:
         ``max(min_design_points, design_points_per_parameter * k)`` for k parameters.
     replicates : independent fills per design set (>= 2: the DEM noise is measured from them).
     confirm_replicates : fills of the DEM confirmation run at each best fit.
+    confirm_extra_replicates : more fills run at a best fit whose first ``confirm_replicates``
+        scatter more than the pooled noise (:func:`validation.study.local_noise`); the observables
+        still flagged on all of them are judged with that local scatter (0: no extra fills; the
+        flagged observables still use their fills' scatter).
     refine_points : extra design sets placed in the plausible region when the chosen effect is
         recalibrated (a second history-matching wave; 0: none).
     max_refine_waves : most history-matching waves of that recalibration: the first always runs,
@@ -73,6 +77,7 @@ class DiagnosisSettings:
     min_design_points: int = 16
     replicates: int = 2
     confirm_replicates: int = 3
+    confirm_extra_replicates: int = 2
     refine_points: int = 8
     max_refine_waves: int = 5
     scan_points: int = 2 ** 14
@@ -97,6 +102,7 @@ class DiagnosisSettings:
         _int("min_design_points", self.min_design_points, 4)
         _int("replicates", self.replicates, 2)
         _int("confirm_replicates", self.confirm_replicates, 1)
+        _int("confirm_extra_replicates", self.confirm_extra_replicates, 0)
         _int("refine_points", self.refine_points, 0)
         _int("max_refine_waves", self.max_refine_waves, 0)
         _int("scan_points", self.scan_points, 64)

@@ -50,14 +50,22 @@ from .surrogates import SurrogateSet, fit_surrogates
 # scatter of a two-fill confirmation, so smaller gains do not justify another design wave)
 STALL_FRACTION = 0.10
 
+#: level of the two-sided F test by which a version's own replicates overrule the base model's noise
+NOISE_TEST_ALPHA = 0.01
+
 __all__ = ["Confirmation", "SurrogateCheck", "RefinementWave", "ModelStudy", "study_model", "refine_study",
-           "confirm", "check_surrogate"]
+           "confirm", "check_surrogate", "local_noise", "version_noise", "own_noise_sentence", "local_noise_sentence"]
 
 
 @dataclass(frozen=True)
 class Confirmation:
     """DEM runs at one parameter set: per observable mean, spread (sample sd), successful runs, z;
-    ``x`` the set in physical units and ``runs`` (replicates, m) every fill's value (NaN = failed)."""
+    ``x`` the set in physical units and ``runs`` (replicates, m) every fill's value (NaN = failed).
+
+    noise_sd : the fill-to-fill sd the z-scores used per observable (the study's pooled noise, or
+        the spread of these fills where :func:`local_noise` chose it); None: the study's.
+    noise_source : ``"pooled"`` or ``"local"`` per observable (empty: all pooled).
+    """
 
     parameters: dict[str, float]
     replicates: int
@@ -67,6 +75,13 @@ class Confirmation:
     z: np.ndarray
     x: np.ndarray | None = None
     runs: np.ndarray | None = None
+    noise_sd: np.ndarray | None = None
+    noise_source: tuple[str, ...] = ()
+
+    @property
+    def local_noise(self) -> tuple[int, ...]:
+        """Indices of the observables judged with these fills' own scatter."""
+        return tuple(j for j, s in enumerate(self.noise_source) if s == "local")
 
     def as_design(self, keys: tuple[str, ...]) -> DesignData:
         """The confirmation runs as a one-set design (to join a refit: DEM results are never thrown away)."""
@@ -77,22 +92,68 @@ class Confirmation:
     def to_dict(self) -> dict:
         return {"parameters": self.parameters, "replicates": self.replicates, "mean": self.mean.tolist(),
                 "spread": self.spread.tolist(), "n_ok": self.n_ok.tolist(), "z": self.z.tolist(),
-                "runs": None if self.runs is None else self.runs.tolist()}
+                "runs": None if self.runs is None else self.runs.tolist(),
+                "noise_sd": None if self.noise_sd is None else self.noise_sd.tolist(),
+                "noise_source": list(self.noise_source)}
 
 
-def confirm(version: ModelVersion, x: np.ndarray, runner: ForwardRunner, misfit: Misfit, replicates: int) -> Confirmation:
-    """Run ``replicates`` fills at physical point ``x`` and compare with the measurements."""
-    keys = misfit.observations.keys
-    params = version.space.as_dict(x)
-    Y = runner(version.effect_names, [params], replicates, keys)[0]  # (R, m)
+def _mean_spread(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per column of ``Y`` (runs, m): successful runs, mean and sample sd (0 with fewer than 2)."""
     n_ok = np.sum(np.isfinite(Y), axis=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         mean = np.nanmean(Y, axis=0)
-        spread = np.nanstd(Y, axis=0, ddof=1) if replicates > 1 else np.zeros(len(keys))
-    sim_sd = misfit.dem_noise_sd / np.sqrt(np.maximum(n_ok, 1))
+        spread = np.where(n_ok > 1, np.nanstd(Y, axis=0, ddof=1), 0.0)
+    return n_ok, mean, spread
+
+
+def local_noise(spread: np.ndarray, n_ok: np.ndarray, noise_sd: np.ndarray, noise_dof: np.ndarray,
+                alpha: float = NOISE_TEST_ALPHA) -> np.ndarray:
+    """Per observable, True where the fills at one parameter set scatter MORE than the pooled noise
+    they are judged with: the upper tail of the same variance-ratio test as :func:`version_noise`
+    (F = spread^2 / noise^2 beyond the 1 - alpha/2 quantile of F(n_ok - 1, noise dof)), or the
+    pooled noise is 0 with no degrees of freedom (it never varied) while these fills did.
+
+    DEM scatter is heteroscedastic: cohesive gravel at 45 rpm gave 43.3 and 52.8 deg at one best fit
+    while the pooled noise was 1.2 deg (F = 33 on 1 and 5 dof, p ~ 0.002). Judging that point's mean
+    with the pooled noise overstates how well two fills pin it down. Only the upper tail counts: a
+    point whose few fills happen to agree closely keeps the pooled (larger) noise."""
+    spread, n_ok, noise_sd, noise_dof = (np.asarray(a, float) for a in (spread, n_ok, noise_sd, noise_dof))
+    dof = n_ok - 1
+    pooled_dof = np.minimum(np.where(np.isfinite(noise_dof), noise_dof, 1e9), 1e9)
+    testable = (dof > 0) & (pooled_dof > 0) & (noise_sd > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(testable, spread ** 2 / np.where(noise_sd > 0, noise_sd, 1.0) ** 2, 0.0)
+    hi = stats.f.isf(alpha / 2, np.maximum(dof, 1), np.maximum(pooled_dof, 1))
+    never_varied = (pooled_dof <= 0) & (noise_sd <= 0) & (dof > 0) & (spread > 0)
+    return (testable & (ratio > hi)) | never_varied
+
+
+def confirm(version: ModelVersion, x: np.ndarray, runner: ForwardRunner, misfit: Misfit, replicates: int,
+            extra_replicates: int = 0) -> Confirmation:
+    """Run ``replicates`` fills at physical point ``x`` and compare with the measurements.
+
+    Where those fills scatter more than the pooled noise (:func:`local_noise`), ``extra_replicates``
+    more fills run at the same point (one call for ``replicates + extra_replicates`` fills whose last
+    ``extra_replicates`` are kept: a model that replays fills by index, as the DEM's cache does,
+    serves the first ones again; one that draws fresh fills draws them), the test is repeated on
+    all of them, and the observables it still flags are judged with the spread of these fills
+    (``sim_sd = spread / sqrt(n)``) instead of the pooled noise."""
+    keys = misfit.observations.keys
+    params = version.space.as_dict(x)
+    Y = runner(version.effect_names, [params], replicates, keys)[0]  # (R, m)
+    n_ok, mean, spread = _mean_spread(Y)
+    local = local_noise(spread, n_ok, misfit.dem_noise_sd, misfit.dem_noise_dof)
+    if extra_replicates > 0 and np.any(local):
+        more = runner(version.effect_names, [params], replicates + extra_replicates, keys)[0]
+        Y = np.concatenate([Y, more[replicates:]], axis=0)
+        n_ok, mean, spread = _mean_spread(Y)
+        local = local_noise(spread, n_ok, misfit.dem_noise_sd, misfit.dem_noise_dof)
+    noise_sd = np.where(local, spread, misfit.dem_noise_sd)
+    sim_sd = noise_sd / np.sqrt(np.maximum(n_ok, 1))
     z = np.where(n_ok > 0, misfit.z(np.nan_to_num(mean), sim_sd), np.nan)
-    return Confirmation(params, int(replicates), mean, spread, n_ok, z, np.array(x, float), np.array(Y, float))
+    return Confirmation(params, int(len(Y)), mean, spread, n_ok, z, np.array(x, float), np.array(Y, float),
+                        noise_sd, tuple("local" if b else "pooled" for b in local))
 
 
 @dataclass(frozen=True)
@@ -149,7 +210,8 @@ def check_surrogate(misfit: Misfit, best: BestFit, confirmation: Confirmation,
     limit = np.where(obs.censored, obs.means, -np.inf)
     sur, dem = np.maximum(best.mu, limit), np.maximum(confirmation.mean, limit)
     n = np.maximum(confirmation.n_ok, 1)
-    sd = np.sqrt(best.sd ** 2 + misfit.dem_noise_sd ** 2 / n)
+    noise = misfit.dem_noise_sd if confirmation.noise_sd is None else confirmation.noise_sd
+    sd = np.sqrt(best.sd ** 2 + noise ** 2 / n)
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.where(confirmation.n_ok > 0, np.abs(dem - sur) / sd, np.nan)
         d = np.where((sd == 0) & (dem == sur), 0.0, d)
@@ -263,8 +325,6 @@ class ModelStudy:
         }
 
 
-#: level of the two-sided F test by which a version's own replicates overrule the base model's noise
-NOISE_TEST_ALPHA = 0.01
 
 
 def version_noise(own_sd: np.ndarray, own_dof: np.ndarray, base_sd: np.ndarray, base_dof: np.ndarray,
@@ -298,6 +358,20 @@ def own_noise_sentence(version: "ModelStudy", base: "ModelStudy") -> str | None:
     return (f"The model '{version.name}' scatters differently from fill to fill than the base model (DEM noise "
             f"sd, {'; '.join(parts)}; a two-sided F test at level {NOISE_TEST_ALPHA:g} rejects the base's), so it "
             "is judged with its own noise there.")
+
+
+def local_noise_sentence(version: "ModelStudy") -> str | None:
+    """Where the DEM confirmation at ``version``'s best fit was judged with its own fills' scatter
+    (:func:`local_noise`), in one sentence with both sds and the number of fills; None elsewhere."""
+    c = version.confirmation
+    if c is None or not c.local_noise:
+        return None
+    obs = version.misfit.observations
+    parts = [f"{obs[j].name}: sd {c.spread[j]:.2g} {obs[j].unit} over {int(c.n_ok[j])} fills against "
+             f"{version.misfit.dem_noise_sd[j]:.2g}" for j in c.local_noise]
+    return (f"At the best fit of '{version.name}' the DEM's fills scatter more than the pooled noise ({'; '.join(parts)}; "
+            f"F test at level {NOISE_TEST_ALPHA:g}), so the confirmation's mean there is judged with that scatter: "
+            "its z says the data cannot tell that mean from the measurement, not that the model matches it closely.")
 
 
 def study_model(version: ModelVersion, observations: Observations, runner: ForwardRunner,
@@ -339,7 +413,8 @@ def confirm_study(study: ModelStudy, runner: ForwardRunner, settings: DiagnosisS
     """``study`` with its DEM confirmation at the best fit and the surrogate check there (the
     last step of :func:`study_model`); its ``seconds`` include them."""
     t0 = time.perf_counter()
-    confirmation = confirm(study.version, study.best.x, runner, study.misfit, settings.confirm_replicates)
+    confirmation = confirm(study.version, study.best.x, runner, study.misfit, settings.confirm_replicates,
+                           settings.confirm_extra_replicates)
     check = check_surrogate(study.misfit, study.best, confirmation, settings)
     return replace(study, confirmation=confirmation, check=check, seconds=study.seconds + time.perf_counter() - t0)
 
