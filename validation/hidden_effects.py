@@ -2,6 +2,8 @@
 
     python -m validation.hidden_effects --out lab --scale paper --device cuda        # 4 cases
     python -m validation.hidden_effects --out lab --scale quick --cases base rolling
+    python -m validation.hidden_effects --measure drum 60rpm '{"rpm": 60, "discard": 1, "record": 2}' \
+        --truth lab/truth_cohesion.json --lab lab/lab_cohesion.yaml --into lab/lab_cohesion_60rpm.yaml
 
 For every case the engine plays the lab: the true model (sliding friction only, or with hidden
 rolling resistance, cohesion or elongated particles) runs the experiments the measurement file
@@ -38,7 +40,7 @@ from calibration.materials import BulkMaterial
 from calibration.model_description import contact_law_to_dict
 import warpdem as wd
 
-__all__ = ["CASES", "generate_case", "main"]
+__all__ = ["CASES", "generate_case", "generate_cases", "measure_later", "main"]
 
 #: loose-fill indices of the "lab" repeats: far from the diagnosis designs (validation.dem_forward)
 LAB_FILLS = 50_000_000
@@ -97,23 +99,23 @@ def case_parameters(case: str) -> dict[str, float]:
     return {**TRUE_FRICTION, **OFF, **spec["parameters"], **shape}
 
 
-def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
-                   processes: Any = "auto", progress: bool = False, dt: float | None = None) -> dict[str, Any]:
-    """Run the lab for several cases at once (one launch per experiment and condition group: every
-    case, drum speed and repeat is a world) and write each case's measurement file, diagnosis
-    config and truth. ``dt`` [s]: a fixed time step for every launch (the diagnosis config then
-    uses the same), else each batch's recommended step."""
+def _run_lab(cases: list[str], conds: dict[str, dict[str, dict[str, Any]]], scale: str, repeats: int,
+             device: str | None, processes: Any, progress: bool, dt: float | None,
+             first_fill: int) -> tuple[dict[str, Any], dict[str, list[str]], list[dict[str, Any]]]:
+    """Run the lab's union model for ``cases`` at ``conds`` (experiment -> condition -> settings):
+    one launch per experiment and condition group (every case, drum speed and repeat is a world),
+    loose fills numbered from ``first_fill``. Returns each case's v2 ``experiments`` section, the
+    notes on repeats that could not be measured, and one record per launch."""
     numerics = {} if dt is None else {"dt": float(dt), "force_dt": True}
     law = wd.ContactLaw(**LAB_LAW)
     mat_cfg = lab_material(scale)
-    t0 = time.perf_counter()
     experiments: dict[str, dict[str, Any]] = {c: {} for c in cases}
     notes: dict[str, list[str]] = {}
     launches = []
-    for e_i, (exp_name, conds) in enumerate(conditions(scale).items()):
+    for e_i, (exp_name, conds_e) in enumerate(conds.items()):
         # conditions differing only in drum speed run in one launch (rpm is per world)
         groups: dict[str, list[tuple[str, dict]]] = {}
-        for cname, settings in conds.items():
+        for cname, settings in conds_e.items():
             key = json.dumps({k: v for k, v in settings.items() if k != "rpm"}, sort_keys=True)
             groups.setdefault(key, []).append((cname, settings))
         for gi, (key, members) in enumerate(groups.items()):
@@ -123,7 +125,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
             d = base_mat.diameter
             material = BulkMaterial.shaped("elongated", d[0], d[1], particle=base_mat.particle,
                                            solids_fraction=base_mat.solids_fraction, aspect_ratio=1.0)
-            first = LAB_FILLS + 10_000 * e_i + 1000 * gi
+            first = first_fill + 10_000 * e_i + 1000 * gi
             exp = make_experiment(exp_name, _experiment_scale(exp_name, scale), contact_law=law, material=material,
                                   fill_per_world=True, first_fill_index=first, **common, **numerics)
             sets, where = [], []
@@ -152,6 +154,20 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                         continue
                     experiments[case].setdefault(exp_name, {"conditions": {}})["conditions"][cname] = {
                         "settings": dict(settings), "observables": _observables(type(exp).OBSERVABLES, rs)}
+    return experiments, notes, launches
+
+
+def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
+                   processes: Any = "auto", progress: bool = False, dt: float | None = None) -> dict[str, Any]:
+    """Run the lab for several cases at once (one launch per experiment and condition group: every
+    case, drum speed and repeat is a world) and write each case's measurement file, diagnosis
+    config and truth. ``dt`` [s]: a fixed time step for every launch (the diagnosis config then
+    uses the same), else each batch's recommended step."""
+    law = wd.ContactLaw(**LAB_LAW)
+    mat_cfg = lab_material(scale)
+    t0 = time.perf_counter()
+    experiments, notes, launches = _run_lab(cases, conditions(scale), scale, repeats, device, processes, progress,
+                                            dt, LAB_FILLS)
     wall = round(time.perf_counter() - t0, 1)
     out.mkdir(parents=True, exist_ok=True)
     for case in cases:
@@ -175,6 +191,42 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
         cfg["output"] = str(out / f"diagnosis_{case}")
         (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
     return {"cases": cases, "wall_s": wall, "launches": launches}
+
+
+#: loose fills of later measurements (what a diagnosis proposed): block k starts here + k * 1e6
+LATER_FILLS = LAB_FILLS + 5_000_000
+
+
+def measure_later(truth_path: Path, lab_path: Path, out_path: Path, experiment: str, condition: str,
+                  settings: dict[str, Any], repeats: int | None = None, device: str | None = None,
+                  processes: Any = "auto", progress: bool = False, dt: float | None = None,
+                  fill_block: int = 0) -> dict[str, Any]:
+    """The lab measures one more condition (e.g. the drum at 60 rpm that a diagnosis proposed to tell
+    two tied candidates apart) with the hidden model of ``truth_path``, and writes ``lab_path``'s
+    measurements plus that condition to ``out_path``. Fresh fills (block ``fill_block`` of
+    :data:`LATER_FILLS`), the truth's scale and repeats unless given. Only the lab reads the truth;
+    a diagnosis of ``out_path`` reads that file alone."""
+    truth = json.loads(Path(truth_path).read_text())
+    case, scale = truth["case"], truth["scale"]
+    repeats = int(repeats or truth.get("repeats", 3))
+    doc = yaml.safe_load(Path(lab_path).read_text())
+    known = doc.get("experiments", {}).get(experiment, {}).get("conditions", {})
+    if condition in known:
+        raise ValueError(f"{lab_path} already holds {experiment}/{condition}; name the new condition differently")
+    t0 = time.perf_counter()
+    experiments, notes, launches = _run_lab([case], {experiment: {condition: dict(settings)}}, scale, repeats, device,
+                                            processes, progress, dt, LATER_FILLS + 1_000_000 * int(fill_block))
+    got = experiments[case].get(experiment, {}).get("conditions", {}).get(condition)
+    if got is None:
+        raise RuntimeError(f"the lab could not measure {experiment}/{condition}: {'; '.join(notes.get(case, []))}")
+    doc.setdefault("experiments", {}).setdefault(experiment, {"conditions": {}})["conditions"][condition] = got
+    if notes.get(case):
+        doc["notes"] = "; ".join(filter(None, [doc.get("notes"), *notes[case]]))
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    out_path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return {"case": case, "condition": f"{experiment}/{condition}", "observables": got["observables"],
+            "wall_s": round(time.perf_counter() - t0, 1), "launches": launches}
 
 
 def generate_case(case: str, out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
@@ -264,15 +316,40 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="results/hidden_effects")
     ap.add_argument("--scale", default="paper", choices=["paper", "quick", "first", "tiny"])
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=None, help="fills per condition (default 3; with --measure: the lab's)")
     ap.add_argument("--device", default=None)
     ap.add_argument("--processes", default="auto")
     ap.add_argument("--progress", action="store_true")
     ap.add_argument("--dt", type=float, default=None, help="fixed time step [s] for the lab and the diagnosis")
+    ap.add_argument("--measure", nargs=3, metavar=("EXPERIMENT", "CONDITION", "SETTINGS_JSON"), default=None,
+                    help="measure one more condition of an existing lab (with --truth, --lab, --into), e.g. "
+                         "drum 60rpm '{\"rpm\": 60, \"discard\": 1, \"record\": 2}'")
+    ap.add_argument("--truth", default=None, help="with --measure: the case's truth_<case>.json")
+    ap.add_argument("--lab", default=None, help="with --measure: the case's measurement file")
+    ap.add_argument("--into", default=None, help="with --measure: the new measurement file to write")
+    ap.add_argument("--fill-block", type=int, default=0, help="with --measure: block of fresh fills (0, 1, ...)")
     args = ap.parse_args(argv)
-    if args.repeats < 2:
+    if args.repeats is not None and args.repeats < 2:
         ap.error("--repeats must be >= 2 (a standard error needs repeats)")
-    res = generate_cases(list(args.cases), Path(args.out), args.scale, args.repeats, args.device, args.processes,
+    if args.measure is not None:
+        if not (args.truth and args.lab and args.into):
+            ap.error("--measure needs --truth, --lab and --into")
+        experiment, condition, settings_json = args.measure
+        try:
+            settings = json.loads(settings_json)
+        except json.JSONDecodeError as e:
+            ap.error(f"--measure SETTINGS_JSON is not JSON: {e}")
+        if not isinstance(settings, dict):
+            ap.error("--measure SETTINGS_JSON must be a JSON object, e.g. '{\"rpm\": 60}'")
+        try:
+            res = measure_later(Path(args.truth), Path(args.lab), Path(args.into), experiment, condition, settings,
+                                args.repeats, args.device, args.processes, args.progress, args.dt, args.fill_block)
+        except (ValueError, FileNotFoundError, RuntimeError) as e:
+            print(f"hidden_effects --measure: {e}")
+            return 2
+        print(json.dumps(res), flush=True)
+        return 0
+    res = generate_cases(list(args.cases), Path(args.out), args.scale, args.repeats or 3, args.device, args.processes,
                          args.progress, args.dt)
     print(json.dumps(res), flush=True)
     return 0
