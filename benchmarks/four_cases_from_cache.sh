@@ -11,7 +11,8 @@
 # Run it again until it prints "four diagnoses finished" (every finished world is in OUT's cache;
 # stop it yourself with CHUNK_S, default 560 s). Each diagnosis reads only OUT/lab_<case>.yaml;
 # once all have finished, benchmarks/score_hidden_effects.py (the only reader of the truth files,
-# copied beside them) writes OUT/score.md and score.json. Env: SRC (default docs/results/hidden_effects_paper), DEVICE
+# copied beside them) writes OUT/score.md and score.json. Env: KEEP_SETTINGS=1 (keep each config's own
+# diagnosis settings instead of the 20-minute ones), SRC (default docs/results/hidden_effects_paper), DEVICE
 # (default cuda), PYTHON (default python3), CASES (default "base rolling cohesion shape"), EXPORT (a
 # folder to copy each case's diagnosis.json and report.html, the labs, truths, configs, log, cache and
 # score to).
@@ -37,6 +38,7 @@ for c in $cases; do
   [ -f "$cfg" ] && continue
   cp "$src/lab_$c.yaml" "$src/truth_$c.json" "$out/" || exit 2
   $py - "$src/diagnose_$c.yaml" "$cfg" "$out" "$c" <<'EOF' || exit 2
+import os
 import sys
 from pathlib import Path
 
@@ -46,7 +48,8 @@ src, dst, out, case = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3]), sys.arg
 doc = yaml.safe_load(Path(src).read_text())
 doc["cache"] = str(out / "dem_cache.jsonl")
 doc["output"] = str(out / f"diagnosis_{case}")
-doc.setdefault("diagnosis", {}).update(designs_up_front=True, replicated_fraction=0.34, design_points_per_parameter=4)
+if os.environ.get("KEEP_SETTINGS") != "1":  # the 20-minute settings, unless the configs' own are kept
+    doc.setdefault("diagnosis", {}).update(designs_up_front=True, replicated_fraction=0.34, design_points_per_parameter=4)
 dst.write_text(yaml.safe_dump(doc, sort_keys=False))
 from validation.config import load_diagnosis_config  # noqa: E402  (checks the config, runs nothing)
 
