@@ -27,9 +27,29 @@ src=${SRC:-$repo/docs/results/hidden_effects_paper}
 export PYTHONPATH="$repo${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
-if [ ! -f "$out/dem_cache.jsonl" ]; then
-  [ -f "${SEED_CACHE:-}" ] || { echo "four_cases_from_cache: SEED_CACHE must name a DEM cache (jsonl)" >&2; exit 2; }
-  cat "$SEED_CACHE" > "$out/dem_cache.jsonl" && echo "$SEED_CACHE" > "$out/seeded_from"
+if [ -n "${SEED_CACHE:-}" ]; then  # every seed record OUT's cache lacks joins it (also on a resumed OUT)
+  [ -f "$SEED_CACHE" ] || { echo "four_cases_from_cache: SEED_CACHE $SEED_CACHE is not a file" >&2; exit 2; }
+  $py - "$SEED_CACHE" "$out/dem_cache.jsonl" <<'EOF' || exit 2
+import json
+import sys
+from pathlib import Path
+
+seed, cache = Path(sys.argv[1]), Path(sys.argv[2])
+have = set()
+if cache.exists():
+    for line in cache.read_text().splitlines():
+        try:
+            have.add(json.loads(line)["id"])
+        except (ValueError, KeyError):
+            pass  # a torn line: the diagnosis reports and drops it
+new = [line for line in seed.read_text().splitlines() if line.strip() and json.loads(line)["id"] not in have]
+with open(cache, "a") as fh:
+    fh.writelines(line + "\n" for line in new)
+print(f"four_cases_from_cache: {len(new)} record(s) of {seed} joined {cache}")
+EOF
+  echo "$SEED_CACHE" >> "$out/seeded_from"
+elif [ ! -f "$out/dem_cache.jsonl" ]; then
+  echo "four_cases_from_cache: SEED_CACHE must name a DEM cache (jsonl) for a new OUT" >&2; exit 2
 fi
 configs=()
 for c in $cases; do
