@@ -625,8 +625,8 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         noisy = final.confirmation.local_noise if final.confirmation is not None else ()
         if noisy:
             obs = final.misfit.observations
-            headline += (f"; the {', '.join(obs[j].name for j in noisy)} judged with the scatter of its own fills there, "
-                         "which is large")
+            headline += (f"; the {', '.join(obs[j].name for j in noisy)} judged with the scatter of "
+                         f"{'its' if len(noisy) == 1 else 'their'} own fills there, which is large")
         if unsettled:
             headline += (f"; the surrogate still disagrees with the DEM at that best fit for {', '.join(unsettled)}"
                          f"{waves_words}, so a better fit may exist: this is not yet a failure of {added}")

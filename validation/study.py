@@ -18,6 +18,11 @@ fresh fills; its residuals use the mean of those runs in place of the surrogate
 (``Var_sim = s_DEM^2 / R``, :mod:`validation.misfit`), so every number reported as "after
 adding the effect" is a simulation, not a surrogate prediction.
 
+DEM scatter also varies within a version's box (cohesive gravel near its best fit scattered 5x the
+pooled noise at 45 rpm): where the confirmation's own fills scatter beyond the pooled noise by the upper
+tail of the same F test, ``confirm_extra_replicates`` more fills run there and the observables still
+flagged are judged with that local spread (:func:`local_noise`; the verdict says so).
+
 Every study also checks its surrogate against that confirmation (:func:`check_surrogate`), and
 :func:`refine_study` adds history-matching waves while the two disagree: a surrogate that is
 wrong near the optimum otherwise puts the "best fit" where the DEM is not best, and the misfit
@@ -323,8 +328,6 @@ class ModelStudy:
             "surrogate_check": None if self.check is None else self.check.to_dict(),
             "refinement": [w.to_dict() for w in self.refinement], "seconds": self.seconds,
         }
-
-
 
 
 def version_noise(own_sd: np.ndarray, own_dof: np.ndarray, base_sd: np.ndarray, base_dof: np.ndarray,
