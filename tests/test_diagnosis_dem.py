@@ -126,3 +126,20 @@ def test_the_lab_measures_a_proposed_condition_later_with_fresh_fills(tiny_lab, 
     # measuring a condition the file already holds is refused (exit 2, no traceback)
     assert lab_main(["--measure", "baffle", "9kg", "{}", "--truth", str(truth), "--lab", str(lab),
                      "--into", str(tmp_path / "x.yaml")]) == 2
+
+
+def test_the_cli_keeps_scikit_learns_convergence_warnings_off_the_screen():
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
+
+    from validation.cli import _quiet_surrogate_fits
+
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        _quiet_surrogate_fits()
+        warnings.warn_explicit("length scale at its bound", ConvergenceWarning, "kernels.py", 455,
+                               module="sklearn.gaussian_process.kernels")
+        warnings.warn_explicit("ours", ConvergenceWarning, "x.py", 1, module="validation.study")
+        warnings.warn_explicit("other", UserWarning, "kernels.py", 1, module="sklearn.gaussian_process.kernels")
+    assert [str(w.message) for w in seen] == ["ours", "other"]  # only sklearn's convergence notes go

@@ -178,6 +178,18 @@ def _prefetch(keys: Sequence[str], space, cands, forward, settings, which: Seque
     return 0
 
 
+def _quiet_surrogate_fits() -> None:
+    """Silence scikit-learn's Gaussian-process convergence warnings for this process. A length scale at
+    its bound (a flat response) is expected and the surrogates' cross-validated quality is reported
+    instead; ``validation.surrogates`` filters them per fit, but ``warnings.catch_warnings`` is not
+    thread-safe and the pooled studies fit in threads, so some leaked onto the user's screen."""
+    import warnings
+
+    from sklearn.exceptions import ConvergenceWarning
+
+    warnings.filterwarnings("ignore", category=ConvergenceWarning, module=r"sklearn\.")
+
+
 def diagnose_main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="warpdem diagnose", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -197,6 +209,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
                     help="with --prefetch: only these experiments' observables (one launch each), e.g. to keep "
                          "each call of a time-limited GPU machine to one experiment")
     args = ap.parse_args(list(argv) if argv is not None else None)
+    _quiet_surrogate_fits()
     from .config import load_diagnosis_config
     from .diagnose import diagnose
 
