@@ -2,8 +2,10 @@
 # Close the loop of a tie: the lab measures the condition a diagnosis proposed, and the case is
 # diagnosed again with that measurement added (the same 20-minute settings, from a DEM cache).
 #
-#   SRC=docs/results/four_cases_local_noise_h200_2026-11-27 CASE=cohesion \
-#   MEASURE='drum 60rpm {"rpm": 60.0, "discard": 1, "record": 2}' benchmarks/measure_proposal.sh OUT
+#   SRC=docs/results/four_cases_local_noise_h200_2026-11-27 CASE=cohesion benchmarks/measure_proposal.sh OUT
+#
+# measures what SRC/diagnosis_<case>/diagnosis.json recommended (MEASURE='drum 60rpm {"rpm": 60.0,
+# "discard": 1, "record": 2}' names a condition yourself).
 #
 # SRC holds the case's lab file, truth, diagnosis config and DEM cache (four_cases_from_cache.sh
 # writes them). The lab (validation.hidden_effects --measure, fresh fills) is the only reader of the
@@ -16,13 +18,18 @@ out=${1:?usage: measure_proposal.sh OUT}
 py=${PYTHON:-python3}
 case_=${CASE:?CASE names the case, e.g. cohesion}
 src=${SRC:?SRC names the folder of the first diagnosis}
-read -r experiment condition settings <<< "${MEASURE:?MEASURE is 'EXPERIMENT CONDITION SETTINGS_JSON'}"
+if [ -n "${MEASURE:-}" ]; then  # 'EXPERIMENT CONDITION SETTINGS_JSON'
+  read -r experiment condition settings <<< "$MEASURE"
+  what=(--measure "$experiment" "$condition" "$settings")
+else  # what the first diagnosis recommended (its tie's proposal)
+  what=(--measure-recommended "$src/diagnosis_$case_/diagnosis.json")
+fi
 repo=$(cd "$(dirname "$0")/.." && pwd)
 export PYTHONPATH="$repo${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 dt=${DT-8.2599588e-05}  # DT= (empty): each launch's recommended step
 mkdir -p "$out/lab" && out=$(cd "$out" && pwd)
 if [ ! -f "$out/lab_$case_.yaml" ]; then  # the lab: the only step that reads the truth
-  $py -m validation.hidden_effects --measure "$experiment" "$condition" "$settings" --truth "$src/truth_$case_.json" \
+  $py -m validation.hidden_effects "${what[@]}" --truth "$src/truth_$case_.json" \
       --lab "$src/lab_$case_.yaml" --into "$out/lab/lab_$case_.yaml" --device "${DEVICE:-cuda}" ${dt:+--dt "$dt"} \
       ${REPEATS:+--repeats "$REPEATS"} > "$out/lab/measure.log" 2>&1 || { tail -3 "$out/lab/measure.log"; exit 2; }
   cp "$out/lab/lab_$case_.yaml" "$out/lab_$case_.yaml"

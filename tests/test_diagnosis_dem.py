@@ -143,3 +143,20 @@ def test_the_cli_keeps_scikit_learns_convergence_warnings_off_the_screen():
         warnings.warn_explicit("ours", ConvergenceWarning, "x.py", 1, module="validation.study")
         warnings.warn_explicit("other", UserWarning, "kernels.py", 1, module="sklearn.gaussian_process.kernels")
     assert [str(w.message) for w in seen] == ["ours", "other"]  # only sklearn's convergence notes go
+
+
+def test_the_lab_reads_what_a_tied_diagnosis_recommended(tmp_path):
+    from pathlib import Path
+
+    from validation.hidden_effects import main as lab_main
+    from validation.hidden_effects import recommended_measurement
+
+    results = Path(__file__).parent.parent / "docs" / "results" / "four_cases_local_noise_h200_2026-11-27"
+    tied = results / "diagnosis_cohesion" / "diagnosis.json"  # rolling resistance and cohesion tied there
+    assert recommended_measurement(tied) == ("drum", "60rpm", {"discard": 1, "record": 2, "rpm": 60.0}, 3)
+    untied = results / "diagnosis_rolling" / "diagnosis.json"
+    with pytest.raises(ValueError, match="recommends no measurement"):
+        recommended_measurement(untied)
+    # a user mistake gets one line and exit code 2
+    assert lab_main(["--measure-recommended", str(untied), "--truth", "t.json", "--lab", "l.yaml",
+                     "--into", str(tmp_path / "x.yaml")]) == 2

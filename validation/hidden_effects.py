@@ -4,6 +4,8 @@
     python -m validation.hidden_effects --out lab --scale quick --cases base rolling
     python -m validation.hidden_effects --measure drum 60rpm '{"rpm": 60, "discard": 1, "record": 2}' \
         --truth lab/truth_cohesion.json --lab lab/lab_cohesion.yaml --into lab/lab_cohesion_60rpm.yaml
+    python -m validation.hidden_effects --measure-recommended lab/diagnosis_cohesion/diagnosis.json \
+        --truth lab/truth_cohesion.json --lab lab/lab_cohesion.yaml --into lab/lab_cohesion_next.yaml
 
 For every case the engine plays the lab: the true model (sliding friction only, or with hidden
 rolling resistance, cohesion or elongated particles) runs the experiments the measurement file
@@ -40,7 +42,7 @@ from calibration.materials import BulkMaterial
 from calibration.model_description import contact_law_to_dict
 import warpdem as wd
 
-__all__ = ["CASES", "generate_case", "generate_cases", "measure_later", "main"]
+__all__ = ["CASES", "generate_case", "generate_cases", "measure_later", "recommended_measurement", "main"]
 
 #: loose-fill indices of the "lab" repeats: far from the diagnosis designs (validation.dem_forward)
 LAB_FILLS = 50_000_000
@@ -197,6 +199,26 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
 LATER_FILLS = LAB_FILLS + 5_000_000
 
 
+def recommended_measurement(diagnosis_json: Path) -> tuple[str, str, dict[str, Any], int]:
+    """``(experiment, condition, settings, repeats)`` of the measurement a diagnosis recommended to tell
+    tied candidates apart (the ``recommended`` proposal of its last round with one), from its
+    ``diagnosis.json``. The condition is named after the key's middle part (``drum/60rpm/...`` ->
+    ``60rpm``). Raises ValueError when the diagnosis recommended none."""
+    doc = json.loads(Path(diagnosis_json).read_text())
+    for rnd in reversed(doc.get("rounds") or []):
+        disc = rnd.get("discrimination") or {}
+        key = disc.get("recommended")
+        if not key:
+            continue
+        for f in disc.get("forecasts", []):
+            prop = f["proposal"]
+            if prop["key"] == key:
+                parts = key.split("/")
+                condition = parts[1] if len(parts) == 3 else prop.get("label", key).replace(" ", "_")
+                return prop["experiment"], condition, dict(prop["condition"]), int(prop.get("n_repeats") or 3)
+    raise ValueError(f"{diagnosis_json} recommends no measurement (no tie, or no proposal separates the tied candidates)")
+
+
 def measure_later(truth_path: Path, lab_path: Path, out_path: Path, experiment: str, condition: str,
                   settings: dict[str, Any], repeats: int | None = None, device: str | None = None,
                   processes: Any = "auto", progress: bool = False, dt: float | None = None,
@@ -324,6 +346,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--measure", nargs=3, metavar=("EXPERIMENT", "CONDITION", "SETTINGS_JSON"), default=None,
                     help="measure one more condition of an existing lab (with --truth, --lab, --into), e.g. "
                          "drum 60rpm '{\"rpm\": 60, \"discard\": 1, \"record\": 2}'")
+    ap.add_argument("--measure-recommended", default=None, metavar="DIAGNOSIS_JSON",
+                    help="measure what this diagnosis.json recommended (its tie's proposal, with its repeats); "
+                         "with --truth, --lab, --into")
     ap.add_argument("--truth", default=None, help="with --measure: the case's truth_<case>.json")
     ap.add_argument("--lab", default=None, help="with --measure: the case's measurement file")
     ap.add_argument("--into", default=None, help="with --measure: the new measurement file to write")
@@ -331,19 +356,30 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.repeats is not None and args.repeats < 2:
         ap.error("--repeats must be >= 2 (a standard error needs repeats)")
-    if args.measure is not None:
+    if args.measure is not None or args.measure_recommended is not None:
+        if args.measure is not None and args.measure_recommended is not None:
+            ap.error("give --measure or --measure-recommended, not both")
         if not (args.truth and args.lab and args.into):
-            ap.error("--measure needs --truth, --lab and --into")
-        experiment, condition, settings_json = args.measure
-        try:
-            settings = json.loads(settings_json)
-        except json.JSONDecodeError as e:
-            ap.error(f"--measure SETTINGS_JSON is not JSON: {e}")
-        if not isinstance(settings, dict):
-            ap.error("--measure SETTINGS_JSON must be a JSON object, e.g. '{\"rpm\": 60}'")
+            ap.error("--measure and --measure-recommended need --truth, --lab and --into")
+        repeats = args.repeats
+        if args.measure_recommended is not None:
+            try:
+                experiment, condition, settings, proposed_repeats = recommended_measurement(Path(args.measure_recommended))
+            except (ValueError, FileNotFoundError, KeyError) as e:
+                print(f"hidden_effects --measure-recommended: {e}")
+                return 2
+            repeats = repeats or proposed_repeats
+        else:
+            experiment, condition, settings_json = args.measure
+            try:
+                settings = json.loads(settings_json)
+            except json.JSONDecodeError as e:
+                ap.error(f"--measure SETTINGS_JSON is not JSON: {e}")
+            if not isinstance(settings, dict):
+                ap.error("--measure SETTINGS_JSON must be a JSON object, e.g. '{\"rpm\": 60}'")
         try:
             res = measure_later(Path(args.truth), Path(args.lab), Path(args.into), experiment, condition, settings,
-                                args.repeats, args.device, args.processes, args.progress, args.dt, args.fill_block)
+                                repeats, args.device, args.processes, args.progress, args.dt, args.fill_block)
         except (ValueError, FileNotFoundError, RuntimeError) as e:
             print(f"hidden_effects --measure: {e}")
             return 2
