@@ -66,6 +66,10 @@ def score_case(folder: Path, case: str) -> dict[str, Any]:
     else:
         row["ranking"], row["top"], row["ln_bayes_gap"] = [], None, None
     row["found"] = row["top"] == hidden if hidden else verdict["base_adequate"] and not row["added"]
+    # a hidden effect the diagnosis declared tied with the top one (it then proposes a measurement)
+    tied = list(diag["rounds"][0].get("tied") or []) if diag["rounds"] else []
+    row["tied"] = tied
+    row["tied_not_first"] = bool(hidden and not row["found"] and hidden in tied and row["top"] in tied)
     final = versions[-1]
     row["final_within_2_sigma"] = final["n_within"] == final["n_observables"]
     conf = diag["versions"][-1].get("confirmation") or {}
@@ -94,7 +98,8 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         chi = " -> ".join(f"{v['chi2_per_dof']:.2f}" for v in h)
         z = " -> ".join(f"{v['max_abs_z']:.1f}" for v in h)
         out.append(f"| {r['case']} ({r['hidden'] or 'none'}) | {first} | {second} | "
-                   f"{'yes' if r['found'] else 'NO'} | {', '.join(r['added']) or '-'} | {chi} | {z} | "
+                   f"{'yes' if r['found'] else 'NO, tied with it' if r.get('tied_not_first') else 'NO'} | "
+                   f"{', '.join(r['added']) or '-'} | {chi} | {z} | "
                    f"{'yes' if r['final_within_2_sigma'] else 'no'}"
                    + (f" ({len(r['local_noise'])} judged with their own fills' scatter)" if r.get("local_noise") else "")
                    + " |")
@@ -121,7 +126,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rows = [score_case(args.folder, c) for c in args.cases]
     found = sum(bool(r.get("found")) for r in rows)
-    text = f"Hidden effect found in {found} of {len(rows)} cases.\n\n" + markdown(rows)
+    tied = sum(bool(r.get("tied_not_first")) for r in rows)
+    text = (f"Hidden effect found in {found} of {len(rows)} cases"
+            + (f"; in {tied} more it tied with the top candidate (the diagnosis then proposes a measurement)"
+               if tied else "") + ".\n\n" + markdown(rows))
     print(text)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
