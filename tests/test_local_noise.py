@@ -99,3 +99,19 @@ def test_the_verdict_and_the_report_say_where_the_confirmation_used_its_own_scat
     assert len(said) == 1 and "base + cohesion" in said[0] and "45" in said[0]
     html = result.write(tmp_path / "diag")["report"].read_text()
     assert html.count("scatter more than the pooled noise") == 1  # in the comparison section
+
+
+def test_the_rule_rarely_fires_on_noise_that_is_the_same_everywhere():
+    # homoscedastic fills (sd 1) against a pooled estimate with 10 dof: the first test (3 fills) rejects at
+    # about its nominal alpha/2 = 0.5 %, and an observable stays "local" only if 5 fills reject again
+    rng = np.random.default_rng(7)
+    n = 40_000
+    pooled = np.sqrt(rng.chisquare(10, n) / 10)  # the pooled sd estimate itself scatters
+    fills = rng.normal(0.0, 1.0, (n, 5))
+    first = local_noise(fills[:, :3].std(axis=1, ddof=1), np.full(n, 3), pooled, np.full(n, 10))
+    both = first & local_noise(fills.std(axis=1, ddof=1), np.full(n, 5), pooled, np.full(n, 10))
+    assert abs(first.mean() - NOISE_TEST_ALPHA / 2) < 0.0015  # the F test's size, within binomial scatter
+    assert both.mean() < 0.004  # 0.27 % here: the 5 fills include the first 3, so half of those stay flagged
+    # and it has power where a point really scatters 5x more (the paper-scale case)
+    noisy = local_noise((5 * fills[:, :2]).std(axis=1, ddof=1), np.full(n, 2), pooled, np.full(n, 10))
+    assert noisy.mean() > 0.3
