@@ -186,7 +186,8 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                  "lab_model": {"contact_law": contact_law_to_dict(law),
                                "material": "elongated family over the size range, aspect_ratio per case "
                                            "(1 = spheres in 5 equal-number size classes)"},
-                 "scale": scale, "repeats": repeats, "notes": notes.get(case, []), "wall_s_all_cases": wall, "launches": launches,
+                 "scale": scale, "repeats": repeats, "dt_s": dt, "notes": notes.get(case, []), "wall_s_all_cases": wall,
+                 "launches": launches,
                  "device": str(device or "default")}
         (out / f"truth_{case}.json").write_text(json.dumps(truth, indent=1, default=str))
         cfg = diagnosis_config(case, scale, dt)
@@ -226,11 +227,12 @@ def measure_later(truth_path: Path, lab_path: Path, out_path: Path, experiment: 
     """The lab measures one more condition (e.g. the drum at 60 rpm that a diagnosis proposed to tell
     two tied candidates apart) with the hidden model of ``truth_path``, and writes ``lab_path``'s
     measurements plus that condition to ``out_path``. Fresh fills (block ``fill_block`` of
-    :data:`LATER_FILLS`), the truth's scale and repeats unless given. Only the lab reads the truth;
+    :data:`LATER_FILLS`), the truth's scale, repeats and fixed time step unless given. Only the lab reads the truth;
     a diagnosis of ``out_path`` reads that file alone."""
     truth = json.loads(Path(truth_path).read_text())
     case, scale = truth["case"], truth["scale"]
     repeats = int(repeats or truth.get("repeats", 3))
+    dt = dt if dt is not None else truth.get("dt_s")  # the lab's fixed step, where it recorded one
     doc = yaml.safe_load(Path(lab_path).read_text())
     known = doc.get("experiments", {}).get(experiment, {}).get("conditions", {})
     if condition in known:
