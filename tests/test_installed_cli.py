@@ -3,6 +3,7 @@ checkout (the engine reaches the applications only through the ``warpdem.command
 import os
 import subprocess
 import sys
+import sysconfig
 import venv
 from pathlib import Path
 
@@ -21,8 +22,16 @@ def installed(tmp_path_factory):
     if r.returncode != 0:
         pytest.skip(f"cannot build the wheel here: {r.stderr[-500:]}")
     env_dir = root / "venv"
-    venv.create(env_dir, system_site_packages=True, with_pip=True)
+    # the dependencies come from the environment running the tests (a venv as in the README, or the
+    # system): its site-packages joins the new venv's path as plain entries, after the venv's own, so
+    # warpdem itself is imported from the wheel installed below and never from an editable checkout.
+    # (system_site_packages=True would see the *base* interpreter's packages, not this venv's.)
+    venv.create(env_dir, system_site_packages=False, with_pip=True)
     py = env_dir / "bin" / "python"
+    own_site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+    parents = dict.fromkeys(sysconfig.get_paths()[k] for k in ("purelib", "platlib"))
+    Path(own_site, "zz_test_parent_env.pth").write_text("".join(f"{p}\n" for p in parents))
     whl = next(wheels.glob("warpdem-*.whl"))
     subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(whl)], check=True)
     return env_dir
