@@ -54,11 +54,12 @@ from .campaign_records import (RECORD_FORMAT, append_records, code_version, desc
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
 from .experiments.checkpoints import BatchCheckpoints, clear_checkpoints
+from .executor import RayExecutor, executor_from_config
 from .experiments.common import _jsonable, cpu_processes
 from .measurement.records import load_measurements
 from .model_description import ModelDescription
 
-TOP_KEYS = {"name", "device", "processes", "output", "contact_law", "material", "plugins", "parameters", "fixed", "design", "batch_worlds",
+TOP_KEYS = {"name", "device", "processes", "executor", "output", "contact_law", "material", "plugins", "parameters", "fixed", "design", "batch_worlds",
             "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills", "vtk",
             "checkpoints"}
 FILL_MODES = ("independent", "shared")
@@ -145,6 +146,7 @@ class CampaignConfig:
     batch_worlds: int = 8
     device: str | None = None
     processes: int | str = "auto"
+    executor: Any = None  # calibration.executor: local processes (None) or a Ray cluster
     fills: str = "independent"  # "independent": a new loose fill for every world; "shared": one fill per batch
     output: str = "results/calibration"
     optimisation: dict[str, Any] = field(default_factory=dict)
@@ -322,6 +324,7 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         raise ConfigError(f"{source}: fills must be one of {list(FILL_MODES)}, got {cfg.fills!r}")
     try:
         cpu_processes(cfg.processes, "cpu")
+        cfg.executor = executor_from_config(raw.get("executor"), cfg.processes, "executor")
     except ConfigError as exc:
         raise ConfigError(f"{source}: {exc}") from None
     return cfg
@@ -372,7 +375,7 @@ def run_response(resp: Response, parameter_sets: list[dict[str, float]], cfg: Ca
         checkpoints = BatchCheckpoints(cfg.checkpoint_folder, cfg.checkpoints.every_s, keep_until_recorded=True)
     try:
         results = exp.run(sets, device=cfg.device, progress=progress, processes=cfg.processes,
-                          checkpoints=checkpoints)
+                          checkpoints=checkpoints, executor=cfg.executor)
     except (wd.StabilityError, wd.ContactOverflowError) as exc:  # the whole batch failed
         return [dict(status="failed", error=f"{type(exc).__name__}: {exc}", angle_deg=None) for _ in parameter_sets]
     wall = time.perf_counter() - t0
@@ -1036,6 +1039,9 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--new-folder", action="store_true",
                     help="if the output folder holds records of another setup or design, use the first of "
                          "<output>-2, <output>-3, ... that is new or whose records fit this config")
+    ap.add_argument("--ray", metavar="ADDRESS", default=None,
+                    help="run the DEM batches on a Ray cluster: 'auto' (a running cluster), 'local' (start one "
+                         "here) or ray://host:port (overrides the config's executor)")
     args = ap.parse_args(argv)
     if args.only is not None and args.max_samples is None:
         ap.error("--only needs --max-samples (the analysis uses every response)")
@@ -1050,6 +1056,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
             return 2
         cfg.device = args.device
     try:
+        if args.ray:
+            cfg.executor = RayExecutor(address=args.ray)
         out = Path(args.out or cfg.output)
         if args.new_folder:
             out = first_fitting_folder(cfg, out)

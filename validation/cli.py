@@ -82,7 +82,7 @@ def _proposals(cfg, observables) -> list:
 
 
 def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path | None = None,
-                    add: Sequence[str] = (), processes: Any = None):
+                    add: Sequence[str] = (), processes: Any = None, ray_address: str | None = None):
     """Everything :func:`validation.diagnose.diagnose` needs, checked: (observations, base space,
     candidates, forward model, settings, dem effects)."""
     from calibration.designs import Parameter, ParameterSpace
@@ -141,10 +141,14 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     # `warpdem calibrate`) and --output to the working directory
     out = output or Path(cfg.output or f"results/diagnosis_{cfg.name}")
     cache = _relative(Path(cfg.cache), base_dir) if cfg.cache else out / "dem_runs.jsonl"
+    from calibration.executor import executor_from_config
+
+    procs = processes if processes is not None else cfg.processes
+    executor = executor_from_config({"kind": "ray", "address": ray_address} if ray_address else cfg.executor,
+                                    procs, "executor")
     forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
-                              fixed=fixed, device=device or cfg.device,
-                              processes=processes if processes is not None else cfg.processes, cache=cache,
-                              progress=False, proposals=proposals)
+                              fixed=fixed, device=device or cfg.device, processes=procs, cache=cache,
+                              progress=False, proposals=proposals, executor=executor)
     settings = DiagnosisSettings(**{**cfg.diagnosis.model_dump(), "add": tuple(dict.fromkeys(added))})
     return observations, ParameterSpace(tuple(plist)), [e.candidate for e in effects], forward, settings, out
 
@@ -198,6 +202,8 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--output", help="output folder (default: the config's 'output')")
     ap.add_argument("--device", help="cpu or cuda (default: the config's, else cuda if present)")
     ap.add_argument("--processes", help="CPU worker processes ('auto' = one per core)")
+    ap.add_argument("--ray", metavar="ADDRESS", help="run the DEM batches on a Ray cluster: 'auto' (a running "
+                    "cluster), 'local' (start one here) or ray://host:port (overrides the config's executor)")
     ap.add_argument("--add", action="append", default=[], metavar="EFFECT",
                     help="add this effect whatever the ranking (repeatable)")
     ap.add_argument("--prefetch", nargs="*", metavar="VERSION",
@@ -225,7 +231,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
         for path in args.config:
             cfg, base_dir = load_diagnosis_config(path)
             output = Path(args.output) if args.output and len(args.config) == 1 else None
-            jobs.append((path, *build_diagnosis(cfg, base_dir, args.device, output, args.add, procs)))
+            jobs.append((path, *build_diagnosis(cfg, base_dir, args.device, output, args.add, procs, args.ray)))
         forward = jobs[0][4]
         for job in jobs[1:]:
             forward.adopt(job[4], where=job[0])

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Optional, Any, Literal, Union
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
@@ -103,6 +103,7 @@ class DiagnosisConfig(_Strict):
     output: str | None = None
     device: str | None = None
     processes: Union[int, Literal["auto"]] = "auto"
+    executor: Optional[dict[str, Any]] = None
     scale: Literal["paper", "quick"] = "paper"
     experiments: dict[Literal["baffle", "drum", "cylinder"], dict[str, Any]] = Field(default_factory=dict)
     model: ModelSection = Field(default_factory=ModelSection)

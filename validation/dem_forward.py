@@ -91,7 +91,8 @@ class DEMForwardModel(ForwardModel):
                  fixed: Mapping[str, float] | None = None, device: str | None = None,
                  processes: int | str | None = "auto", cache: str | Path | None = None,
                  progress: bool = False, proposals: Sequence[ProposedMeasurement] = (),
-                 superset: bool | str = "auto", checkpoint_every_s: float | None = 120.0) -> None:
+                 superset: bool | str = "auto", checkpoint_every_s: float | None = 120.0,
+                 executor: Any = None) -> None:
         self.base = base
         self.base_material = base_material
         self.effects = {e.name: e for e in effects}
@@ -107,6 +108,8 @@ class DEMForwardModel(ForwardModel):
         self.fixed = dict(fixed or {})
         self.device = device
         self.processes = processes
+        # where the batches run (calibration.executor: local processes or a Ray cluster); None: local
+        self.executor = executor
         self.progress = progress
         self._proposals = tuple(proposals)
         self.cache_path = Path(cache) if cache is not None else None
@@ -336,7 +339,7 @@ class DEMForwardModel(ForwardModel):
         print(f"DEM: {exp_name} {dict(settings) or ''}, {len(sets)} world(s) of {desc.contact_law.describe()}, "
               f"{desc.material.name} ...", file=sys.stderr, flush=True)
         results = exp.run(sets, device=self.device, progress=self.progress, processes=self.processes,
-                          checkpoints=self.checkpoints)
+                          checkpoints=self.checkpoints, executor=self.executor)
         wall = time.perf_counter() - t0
         print(f"DEM: {exp_name}: {len(sets)} world(s) in {wall:.1f} s", file=sys.stderr, flush=True)
         self.dem_seconds += wall

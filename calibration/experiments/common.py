@@ -30,6 +30,7 @@ import trimesh
 import warpdem as wd
 from warpdem import ConfigError, ContactOverflowError, StabilityError
 
+from ..executor import LocalExecutor, RayExecutor
 from ..filling import FillResult, add_fill, pour_fill, random_fill
 from ..materials import BulkMaterial, sample_particles
 from .checkpoints import BatchCheckpoint, BatchCheckpoints, clear_checkpoints, decode_value
@@ -395,27 +396,35 @@ class Experiment:
         return np.array([p[0] for p in per]), np.array([p[1] for p in per])
 
     def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int,
-                          checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
-        """:meth:`run` with the worlds split into ``nproc`` contiguous chunks, one process each
-        (each chunk checkpoints into its own slot)."""
+                          checkpoints: BatchCheckpoints | None = None,
+                          executor: RayExecutor | None = None) -> list[ExperimentResult]:
+        """:meth:`run` with the worlds split into ``nproc`` contiguous chunks, one local process each,
+        or one Ray task each when ``executor`` is given (each chunk checkpoints into its own slot)."""
         import concurrent.futures
         import multiprocessing
 
         wall0 = time.perf_counter()
         bounds = np.linspace(0, len(parameter_sets), nproc + 1).round().astype(int)
         chunks = [(int(a), parameter_sets[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
-        ctx = multiprocessing.get_context("spawn")  # a clean interpreter: no inherited Warp/CUDA state
-        # the workers import the user's sub-model modules before they unpickle the experiment
-        with concurrent.futures.ProcessPoolExecutor(max_workers=nproc, mp_context=ctx, initializer=_load_worker_plugins,
-                                                    initargs=(tuple(self.plugins),)) as pool:
-            futures = [pool.submit(_run_chunk, self, sets, device, start, checkpoints) for start, sets in chunks]
-            parts = [f.result() for f in futures]
+        if executor is not None:
+            on_gpu = str(device or "").startswith("cuda")
+            parts = executor.map(_run_chunk_on_ray, [(self, sets, device, start, checkpoints)
+                                                     for start, sets in chunks], on_gpu)
+        else:
+            ctx = multiprocessing.get_context("spawn")  # a clean interpreter: no inherited Warp/CUDA state
+            # the workers import the user's sub-model modules before they unpickle the experiment
+            with concurrent.futures.ProcessPoolExecutor(max_workers=nproc, mp_context=ctx,
+                                                        initializer=_load_worker_plugins,
+                                                        initargs=(tuple(self.plugins),)) as pool:
+                futures = [pool.submit(_run_chunk, self, sets, device, start, checkpoints) for start, sets in chunks]
+                parts = [f.result() for f in futures]
         wall = round(time.perf_counter() - wall0, 3)
         results = []
         for (start, _), part in zip(chunks, parts):
             for r in part:
                 r.world += start
-                r.timing = {**r.timing, "processes": nproc, "chunk_first_world": start,
+                r.timing = {**r.timing, "processes" if executor is None else "ray_tasks": nproc,
+                            "chunk_first_world": start,
                             "chunk_wall_s": r.timing["wall_s"], "wall_s": wall, "worlds": len(parameter_sets),
                             "note": "timing of this world's chunk (one process); wall_s: the whole run"}
                 results.append(r)
@@ -452,7 +461,8 @@ class Experiment:
 
     def run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None = None,
             progress: bool = False, processes: int | str | None = 1,
-            checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
+            checkpoints: BatchCheckpoints | None = None,
+            executor: LocalExecutor | RayExecutor | None = None) -> list[ExperimentResult]:
         """Run the experiment, one world per parameter set (contact parameters by the model's
         names, e.g. ``mu_s_pp``); returns one :class:`ExperimentResult` per world, in order.
 
@@ -468,13 +478,20 @@ class Experiment:
         continue a saved one of this very batch (:class:`BatchCheckpoints`; module docstring).
         What was resumed, saves, their time [s] and size [bytes] are in ``timing["checkpoint"]``;
         the checkpoint is removed when the results are returned (unless
-        ``keep_until_recorded``). Not with ``vtk_every`` (a VTK series is not resumable)."""
-        nproc = cpu_processes(processes, device)
+        ``keep_until_recorded``). Not with ``vtk_every`` (a VTK series is not resumable).
+
+        executor: where the batches run (:mod:`calibration.executor`); a :class:`LocalExecutor`
+        replaces ``processes`` by its own, a :class:`RayExecutor` splits the worlds into Ray tasks."""
+        if isinstance(executor, LocalExecutor):
+            processes, executor = executor.processes, None
         n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
         ck = checkpoints if self.vtk_every is None else None
-        if nproc > 1 and n_sets > 1 and self.vtk_every is None:
+        on_gpu = str(device if device is not None else _preferred_device()).startswith("cuda")
+        nproc = executor.task_count(n_sets, on_gpu) if executor is not None else cpu_processes(processes, device)
+        if (nproc > 1 or executor is not None) and n_sets > 1 and self.vtk_every is None:
             inner = dataclasses.replace(ck, keep_until_recorded=True) if ck is not None else None
-            results = self._run_in_processes(list(parameter_sets), device, min(nproc, n_sets), inner)
+            results = self._run_in_processes(list(parameter_sets), device if device is not None or not on_gpu
+                                             else "cuda", min(nproc, n_sets), inner, executor)
         else:
             results = self._run(parameter_sets, device, progress, ck)
         if ck is not None and not ck.keep_until_recorded:
@@ -686,6 +703,22 @@ def _load_worker_plugins(plugins: tuple[str, ...]) -> None:
         from ..model_description import load_plugins
 
         load_plugins(list(plugins))
+
+
+def _preferred_device() -> str:
+    import warp as wp
+
+    return str(wp.get_preferred_device())
+
+
+def _run_chunk_on_ray(exp: Experiment, parameter_sets: list, device: str | None, first_world: int,
+                      checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
+    """A Ray task of :meth:`Experiment._run_in_processes`: load the law's plugins, run the chunk."""
+    if exp.plugins:
+        from ..model_description import load_plugins
+
+        load_plugins(list(exp.plugins))
+    return _run_chunk(exp, parameter_sets, device, first_world, checkpoints)
 
 
 def _run_chunk(exp: Experiment, parameter_sets: list, device: str | None, first_world: int,
