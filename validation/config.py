@@ -11,6 +11,7 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
     output: results/diagnosis         # default: results/diagnosis_<name> (relative to the working directory)
     device: null                      # null: cuda if present, else cpu
     processes: auto                   # CPU: worlds split over one process per core
+    executor: {kind: ray, address: auto}  # optional: DEM batches on a Ray cluster (docs/scale_out.md)
     scale: paper                      # experiment preset (paper | quick)
     experiments: {drum: {scale: short}}   # per experiment: settings for every condition
     model:
