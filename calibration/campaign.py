@@ -582,8 +582,19 @@ class Campaign:
         if self.verbose:
             print(f"[calibrate {time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
+    #: what :meth:`design` gives, in words (results.json and summary.md)
+    design_kind = "Latin hypercube samples"
+
     def design(self) -> np.ndarray:
+        """The design points, one row per sample in the order of ``cfg.space`` (a subclass may
+        give fixed points instead of the Latin hypercube: calibration/reproduction.py)."""
         return latin_hypercube(self.cfg.space, self.cfg.samples, seed=self.cfg.seed)
+
+    def held_out_mask(self, n: int) -> np.ndarray:
+        """Which of the ``n`` design samples only test the surrogate (True: held out): the last
+        ``cfg.held_out`` ones (a subclass with fixed points may hold out others, e.g. the seed
+        paper's validation rows: calibration/reproduction.py)."""
+        return np.arange(n) >= n - self.cfg.held_out
 
     # ------------------------------------------------------------------ records
     def _read(self) -> tuple[list[tuple[int, dict]], list[tuple[int, dict]]]:
@@ -828,10 +839,10 @@ class Campaign:
                       for i in range(len(X))], dtype=float)
         failed = [dict(index=i, response=n, error=done[(i, n)]["error"]) for i in range(len(X)) for n in rnames
                   if done[(i, n)]["status"] != "ok"]
-        res["design"] = dict(samples=len(X), held_out=cfg.held_out, seed=cfg.seed, X=X, Y=Y, failed=failed)
+        res["design"] = dict(samples=len(X), held_out=cfg.held_out, seed=cfg.seed, X=X, Y=Y, failed=failed,
+                             kind=self.design_kind)
         ok = np.all(np.isfinite(Y), axis=1)
-        n_train = len(X) - cfg.held_out
-        tr = np.arange(len(X)) < n_train
+        tr = ~self.held_out_mask(len(X))
         if ok[tr].sum() <= len(pnames) + 1:
             raise RuntimeError(f"only {ok[tr].sum()} successful training samples; see {self.samples_path}")
         Xtr, Ytr = X[tr & ok], Y[tr & ok]
@@ -956,7 +967,7 @@ def summary_markdown(res: Mapping[str, Any]) -> str:
         spread = "" if t.get("std_deg") is None else f", std {t['std_deg']:.2f} deg between repeats"
         lines.append(f"- {n}: {t['deg']:.3f} deg ({t['source']}{spread})")
     d = res["design"]
-    lines += ["", f"## Design: {d['samples']} Latin hypercube samples ({d['held_out']} held out), "
+    lines += ["", f"## Design: {d['samples']} {d.get('kind', 'Latin hypercube samples')} ({d['held_out']} held out), "
               f"{len(d['failed'])} failed runs; design DEM time {res.get('design_dem_wall_s_all_sessions', '?')} s "
               f"over all sittings (this sitting's design part: {res['campaign_wall_s']} s)", ""]
     s = res["surrogate"]
