@@ -81,8 +81,8 @@ def clean_registry():
 
 def test_builtins_found_by_scanning_the_package():
     assert {"hertz_mindlin", "none", "rolling", "cohesion"} <= set(contact.BUILTIN_MODULES)
-    assert contact.available("cohesion") == ["none", "sjkr", "sjkr2"]
-    assert contact.available("rolling") == ["cdt", "epsd", "epsd2", "none"]
+    assert contact.available("cohesion") == ["none", "sjkr", "sjkr2", "sjkr2_liggghts", "sjkr_liggghts"]
+    assert contact.available("rolling") == ["cdt", "cdt_liggghts", "epsd", "epsd2", "none"]
 
 
 def test_a_new_file_in_the_package_folder_is_one_new_effect(tmp_path, monkeypatch):

@@ -13,6 +13,7 @@ Output formats read here (LIGGGHTS manual, ``dump custom`` and ``fix print``):
 """
 from __future__ import annotations
 
+import functools
 import os
 import re
 import shutil
@@ -48,8 +49,12 @@ def liggghts_executable() -> str | None:
 
 
 def liggghts_version(executable: str | None = None) -> str:
-    """Version line of the executable, e.g. ``LIGGGHTS-PUBLIC 3.8.0``."""
-    exe = executable or _require_executable()
+    """Version line of the executable, e.g. ``LIGGGHTS-PUBLIC 3.8.0`` (asked once per executable)."""
+    return _version_of(executable or _require_executable())
+
+
+@functools.lru_cache(maxsize=None)
+def _version_of(exe: str) -> str:
     out = subprocess.run([exe, "-h"], capture_output=True, text=True, timeout=60).stdout
     m = re.search(r"Version\s+([^,)]+)", out)
     return m.group(1).strip() if m else out.splitlines()[0] if out else "unknown"
@@ -76,10 +81,15 @@ class LiggghtsRun:
 
 
 def run_deck(deck: str, folder: str | os.PathLike, files: dict[str, str | bytes] | None = None,
-             timeout_s: float = 3600.0, executable: str | None = None) -> LiggghtsRun:
+             timeout_s: float = 3600.0, executable: str | None = None, *,
+             screen_file: str | None = None) -> LiggghtsRun:
     """Write ``deck`` (and ``files``: name -> text or bytes, e.g. STL meshes) into ``folder`` and
     run LIGGGHTS there on one process. Raises :class:`LiggghtsFailed` with the log's tail when
-    the run reports an error or exits non-zero."""
+    the run reports an error or exits non-zero.
+
+    screen_file: write the screen output to this file in ``folder`` (None: no screen output).
+    Decks with ``fix mesh/surface`` need one: LIGGGHTS 3.8 prints the mesh import to the screen
+    stream and crashes (segmentation fault) when there is none."""
     exe = executable or _require_executable()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -92,7 +102,7 @@ def run_deck(deck: str, folder: str | os.PathLike, files: dict[str, str | bytes]
             target.write_text(content)
     (folder / "in.deck").write_text(deck)
     t0 = time.perf_counter()
-    proc = subprocess.run([exe, "-in", "in.deck", "-log", "log.liggghts", "-screen", "none", "-nocite"],
+    proc = subprocess.run([exe, "-in", "in.deck", "-log", "log.liggghts", "-screen", screen_file or "none", "-nocite"],
                           cwd=folder, capture_output=True, text=True, timeout=timeout_s,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
     wall = time.perf_counter() - t0

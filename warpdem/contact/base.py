@@ -109,6 +109,18 @@ class SubModel:
     reference: ClassVar[str] = ""
     #: the sub-model a diagnosis tries first for its kind's effect (e.g. rolling resistance)
     default_candidate: ClassVar[bool] = False
+    #: cohesion sub-models: whether the tangential (Coulomb) and rolling limits see this force,
+    #: i.e. get ``fn`` = normal + cohesion (LIGGGHTS ``tangential_reduce on``); False: they get
+    #: the normal sub-model's force alone (LIGGGHTS 3.8's default, ``tangential_reduce off``).
+    #: Read by :func:`warpdem.stages.law.law_evaluator`.
+    cohesion_in_friction_limit: ClassVar[bool] = True
+    #: normal sub-models: where a wall contact's point lies, from which the wall stage takes the
+    #: contact point's velocity and the lever arm of the contact force. False: on the wall
+    #: surface, r - delta from the sphere centre (a rigid wall); True: at half the overlap,
+    #: r - delta / 2 (LIGGGHTS src/surface_model_default.h; two bodies of equal stiffness).
+    #: Sphere-sphere contacts lie at half the overlap either way. Read by
+    #: :func:`warpdem.stages.wall_contacts.wall_stage_kernels`.
+    wall_contact_at_half_overlap: ClassVar[bool] = False
 
     def make(self, column: Callable[[str], int]) -> "wp.Function":
         """Return the ``wp.func`` implementing this sub-model.

@@ -17,8 +17,11 @@ With d = r_i + r_j - delta the four factors are -delta, 2 r_i - delta, 2 r_j - d
     A_pp = pi/4 delta (2 r_i - delta)(2 r_j - delta)(2 r_i + 2 r_j - delta) / d^2
 
 which avoids the cancellation of d - r_i - r_j in single precision (at delta = 1e-4 R the
-literal form loses ~1e-3 of A in float32). LIGGGHTS scales the wall force by the mesh's
-``area_ratio``; warpdem merges the triangles of one flat contact instead (ratio 1).
+literal form loses ~1e-3 of A in float32). LIGGGHTS multiplies the wall area and the wall
+force by ``area_ratio``, which LIGGGHTS-PUBLIC 3.8 sets to 1 for every wall contact
+(src/fix_wall_gran_base.h); its contact history keeps one contact where a sphere touches an
+edge or vertex of a flat mesh, and warpdem merges the triangles of one flat contact (measured
+alike on a face, an edge and a vertex: ``docs/liggghts_reference.md``).
 
 ``sjkr2`` (LIGGGHTS-PUBLIC ``src/cohesion_model_sjkr2.h``; doc ``gran_cohesion_sjkr2``), a
 linearised area:
@@ -31,8 +34,15 @@ Note that for particles this is twice the first-order expansion of the exact ``s
 agree to first order (2 pi r_i delta); a k calibrated with one model does not carry over to
 the other.
 
-In LIGGGHTS the cohesion force is part of ``F_n`` seen by the tangential (Coulomb) and
-rolling sub-models; here too (the law passes ``fn`` = normal + cohesion to them).
+Which normal force the friction limits see. ``sjkr``/``sjkr2`` add their force to the ``fn``
+that the tangential (Coulomb, mu |F_n|) and rolling (mu_r R* |F_n|) sub-models get, as LIGGGHTS
+does with the keyword ``tangential_reduce on``. LIGGGHTS 3.8's *default* is ``tangential_reduce
+off`` (src/cohesion_model_sjkr.h: ``if(tangentialReduce_) sidata.Fn += Fn_coh;``): its friction
+and rolling limits see the Hertz force plus damping alone, which in a resting cohesive contact is
+the load plus k A, so the same k gives more friction and rolling resistance there than here.
+``sjkr_liggghts``/``sjkr2_liggghts`` are the same forces with LIGGGHTS' default
+(``cohesion_in_friction_limit = False``; checked against LIGGGHTS 3.8 by
+``tests/test_liggghts_contact.py``, see ``docs/liggghts_reference.md``).
 
 Not built: a JKR model with a pull-off range (e.g. LAMMPS ``pair granular jkr``), in which
 a contact survives separation up to a negative overlap and its force depends on the loading
@@ -119,3 +129,25 @@ class SimplifiedJKR2(SubModel):
             return -p[c.row, c_k] * sjkr2_contact_area(c)
 
         return sjkr2_cohesion
+
+
+@register
+class SimplifiedJKRLiggghtsDefault(SimplifiedJKR):
+    """``sjkr`` with LIGGGHTS 3.8's default ``tangential_reduce off``: the friction and rolling
+    limits see F_n without the cohesion force."""
+
+    name = "sjkr_liggghts"
+    default_candidate = False
+    cohesion_in_friction_limit = False
+    reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr.h with its default tangential_reduce off (F = -k A, "
+                 "A = exact intersection area; the tangential and rolling limits see F_n without it)")
+
+
+@register
+class SimplifiedJKR2LiggghtsDefault(SimplifiedJKR2):
+    """``sjkr2`` with LIGGGHTS 3.8's default ``tangential_reduce off``."""
+
+    name = "sjkr2_liggghts"
+    cohesion_in_friction_limit = False
+    reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr2.h with its default tangential_reduce off (F = -k A, "
+                 "A = 2 pi (2 R*) delta; the tangential and rolling limits see F_n without it)")

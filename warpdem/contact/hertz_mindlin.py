@@ -24,7 +24,9 @@ Two tangential sub-models share the Mindlin spring and differ in how sliding is 
         S_t |delta_t| > mu_s |F_n|  ->  F_t = mu_s |F_n| (-delta_t / |delta_t|),
                                          delta_t <- -F_t / S_t   (no damping while sliding)
         otherwise                   ->  F_t = -S_t delta_t + F_t^d
-    F_n includes the normal damping and cohesion, as LIGGGHTS' ``sidata.Fn`` does.
+    F_n includes the normal damping, as LIGGGHTS' ``sidata.Fn`` does, and the cohesion of
+    ``sjkr``/``sjkr2`` (LIGGGHTS ``tangential_reduce on``; not with ``sjkr_liggghts``, LIGGGHTS'
+    default: :mod:`warpdem.contact.cohesion`).
 ``mindlin`` (before 2026-11-27 the default): the spring is turned into the tangent plane with
     its magnitude kept; the Coulomb cap applies to the whole tangential force (spring plus
     damping), and while sliding the spring is reset so that spring plus damping carry exactly
@@ -82,6 +84,21 @@ class HertzNormal(SubModel):
             return f_elastic + f_damp, s_n
 
         return hertz_normal
+
+
+@register
+class HertzNormalLiggghtsWall(HertzNormal):
+    """``hertz`` with LIGGGHTS' wall contact point: half the overlap from the wall, r - delta / 2
+    from the sphere centre (LIGGGHTS src/surface_model_default.h: ``cr = radi - 0.5*deltan`` is
+    both the lever of the tangential force and the radius of the contact point's velocity).
+    ``hertz`` puts it on the wall surface (r - delta), exact for a rigid wall; LIGGGHTS' point
+    is exact for a wall as stiff as the sphere. The forces are the same; spin and tangential
+    rebound at a wall differ by O(delta / r) (``docs/liggghts_reference.md``)."""
+
+    name = "hertz_liggghts"
+    wall_contact_at_half_overlap = True
+    reference = ("Hertz (1882); Tsuji et al. (1992) damping; seed paper eqs. (1), (9), (11), (12); wall contact point "
+                 "at r - delta/2 as LIGGGHTS-PUBLIC 3.8 src/surface_model_default.h")
 
 
 @register

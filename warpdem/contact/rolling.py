@@ -6,7 +6,13 @@
           the sphere centre to the contact point (EDEM convention). Guard against reversal
           jitter: the torque is capped so that it cannot reverse w_rel within one step,
           |tau| <= I* |w_rel| / dt. (LIGGGHTS ``rolling_friction cdt``, src/rolling_model_cdt.h,
-          is the same model with the elastic F_n = k_n delta and lever R* instead, no guard.)
+          is the same model with the elastic F_n = k_n delta and lever R* instead, no guard:
+          ``cdt_liggghts``. Between equal spheres R* = r/2 against EDEM's R_i ~ r.)
+``cdt_liggghts`` LIGGGHTS 3.8 ``rolling_friction cdt`` (src/rolling_model_cdt.h):
+          tau_i = -mu_r (k_n delta) R* w_rel / |w_rel|, its component along the normal removed,
+          k_n delta = 4/3 E* sqrt(R* delta) delta the elastic Hertz force (no damping, no
+          cohesion), R* = r_i r_j / (r_i + r_j) or r_i at a wall; no guard (the torque flips
+          with w_rel, so a sphere at rest jitters by ~mu_r F_n R* dt / I).
 ``epsd``  elastic-plastic spring-dashpot of **Ai et al. (2011) model C** without its viscous
           term (eta_r = 0); the spring is LIGGGHTS ``rolling_friction epsd``'s
           (src/rolling_model_epsd.h: ``kr = 2.25*cdata.kn*rmu*rmu*reff*reff``), its dashpot is
@@ -23,7 +29,11 @@
                                                           kt = St of normal_model_hertz.h)
               |M_r| <= mu_r R* |F_n|                        (``fabs(cdata.Fn)*reff*rmu``)
           R* = r_i r_j / (r_i + r_j) between particles and r_i at a wall (LIGGGHTS ``reff``
-          there). F_n includes damping and cohesion, as LIGGGHTS' ``cdata.Fn`` does.
+          there). F_n includes damping, as LIGGGHTS' ``sidata.Fn`` does, and the cohesion of
+          ``sjkr``/``sjkr2`` (LIGGGHTS ``tangential_reduce on``; LIGGGHTS' default leaves it
+          out: ``sjkr_liggghts``, :mod:`warpdem.contact.cohesion`). At a wall LIGGGHTS turns
+          the spring by w (r - delta/2) / (r - delta) per step instead of w (its ``wr`` is
+          scaled to the contact radius), a difference of O(delta / r).
           One difference: LIGGGHTS keeps the stored torque as is; here, as for ``epsd`` and
           the tangential spring, it is turned into the current tangent plane (magnitude kept),
           which only matters while the contact normal rotates.
@@ -88,6 +98,31 @@ class ConstantDirectionalTorque(SubModel):
             return -t_mag / w_len * w_roll, spring
 
         return cdt_rolling
+
+
+@register
+class LiggghtsCDT(SubModel):
+    kind = "rolling"
+    name = "cdt_liggghts"
+    parameters = (MU_R,)
+    reference = ("LIGGGHTS-PUBLIC 3.8 rolling_friction cdt (src/rolling_model_cdt.h): tau = -mu_r k_n delta R* "
+                 "w_rel/|w_rel| without its normal component, k_n delta the elastic Hertz force; no guard")
+
+    def make(self, column):
+        c_mu = column("mu_r")
+
+        @wp.func
+        def cdt_liggghts_rolling(c: ContactInput, p: wp.array2d(dtype=float), fn: float, spring: wp.vec3):
+            w_len = wp.length(c.w_rel)
+            if w_len <= 0.0:
+                return wp.vec3(0.0), spring
+            # elastic Hertz force k_n delta, k_n = 4/3 E* sqrt(R* delta) (normal_model_hertz.h)
+            f_elastic = 4.0 / 3.0 * c.e_eff * wp.sqrt(c.r_eff * c.overlap) * c.overlap
+            t = -(p[c.row, c_mu] * f_elastic * c.r_eff / w_len) * c.w_rel
+            t = t - wp.dot(t, c.normal) * c.normal  # torsion part removed (torsionTorque off)
+            return t, spring
+
+        return cdt_liggghts_rolling
 
 
 @register

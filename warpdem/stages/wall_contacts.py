@@ -342,7 +342,9 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
     Both call ``wall_forces_of_sphere`` (compiled per law): for each wall contact that stage 1
     found: last step's history of the same wall is taken if its normal agrees (cosine >
     WALL_MATCH_COS); the wall material's velocity at the contact point (v + w x (p - c(t))
-    while the wall moves) gives the relative motion; the law gives fn, ft and the rolling
+    while the wall moves) gives the relative motion; the contact point p is the closest point
+    of the wall, r - delta from the sphere centre, or at r - delta / 2 for a normal sub-model
+    with ``wall_contact_at_half_overlap`` (LIGGGHTS' convention); the law gives fn, ft and the rolling
     torque (damped for the mass of ``law.clump_damping_mass``). Writes the springs into this
     step's history, the summed force F = sum (fn n + ft) [N] and torque
     T = sum ((p - x_b) x F + torque) [N m] about the body's centre into ``forces`` (the particle
@@ -351,6 +353,8 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
     nothing (the fused kernel writes its count 0)."""
     evaluate = law_evaluator(law)
     damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
+    # where the contact point lies (SubModel.wall_contact_at_half_overlap): on the wall, or r - delta/2
+    half_overlap_point = bool(getattr(law.submodels["normal"], "wall_contact_at_half_overlap", False))
     track_wear = bool(law.track_wear)
     roll_hist = bool(law.needs_rolling_history)
     entry = entry_function(history_layout)  # compiled in: where slot s of sphere i lies
@@ -385,6 +389,11 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
             nrm = contacts.wall_normal[e]
             cp = found.point[e]
             depth = found.depth[e]
+            arm = ri - depth
+            if wp.static(half_overlap_point):
+                # LIGGGHTS (src/surface_model_default.h, cri = radi - deltan/2): half the overlap
+                arm = ri - 0.5 * depth
+                cp = xi - arm * nrm
             spring = wp.vec3(0.0)
             roll = wp.vec3(0.0)
             for o in range(n_old):
@@ -415,7 +424,7 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
             c.m_eff = damping_mass(me.m, me.i_mean, xi - xb, nrm)
             c.e_eff = effective_youngs_modulus(e_i, nu_i, e_w, nu_w)
             c.g_eff = effective_shear_modulus(e_i, nu_i, e_w, nu_w)
-            c.arm = ri - depth
+            c.arm = arm
             c.i_eff = me.i_mean
             c.dt = dt
             c.row = 2 * world + 1
