@@ -43,14 +43,14 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import warp as wp
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 import warpdem as wd
 from warpdem import ConfigError
+from warpdem.config_io import check_device, check_output_folder, load_config_file
 
 from .campaign_records import (RECORD_FORMAT, append_records, code_version, describe_differences, fingerprint,
-                               plain, plugin_hashes, read_records, write_atomic)
+                               is_campaign_record, plain, plugin_hashes, read_records, write_atomic)
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
 from .experiments.checkpoints import BatchCheckpoints, clear_checkpoints
@@ -225,6 +225,14 @@ def _check_sections(raw: Mapping[str, Any], source: str) -> tuple[VtkOutput | No
     return sections.vtk, sections.checkpoints
 
 
+def _whole_number(value: Any, where: str, minimum: int = 1) -> int:
+    """``value`` as an integer >= ``minimum`` (``2`` or ``2.0``; not ``two``, ``true`` or ``2.5``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not float(value).is_integer() \
+            or value < minimum:
+        raise ConfigError(f"{where} must be a whole number >= {minimum}, got {value!r}")
+    return int(value)
+
+
 def _response(d: Any, where: str) -> Response:
     if not isinstance(d, Mapping):
         raise ConfigError(f"{where}: expected a mapping with keys {sorted(RESPONSE_KEYS)}, got {d!r}")
@@ -234,9 +242,7 @@ def _response(d: Any, where: str) -> Response:
     for k in ("name", "experiment"):
         if k not in d:
             raise ConfigError(f"{where}: missing '{k}'")
-    rep = int(d.get("replicates", 1))
-    if rep < 1:
-        raise ConfigError(f"{where}: replicates must be >= 1, got {rep}")
+    rep = _whole_number(d.get("replicates", 1), f"{where}: replicates")
     vtk_keys = sorted(k for k in (d.get("settings") or {}) if str(k).startswith("vtk_"))
     if vtk_keys:
         raise ConfigError(f"{where}: settings {vtk_keys}: a campaign asks for VTK output in its top-level "
@@ -248,13 +254,7 @@ def _response(d: Any, where: str) -> Response:
 def load_config(path: str | os.PathLike) -> CampaignConfig:
     """Read and check a campaign configuration; every error names the offending key."""
     path = Path(path)
-    if not path.exists():
-        raise ConfigError(f"calibration config not found: {path}")
-    try:
-        with open(path) as fh:
-            raw = json.load(fh) if path.suffix == ".json" else yaml.safe_load(fh)
-    except (yaml.YAMLError, json.JSONDecodeError) as exc:
-        raise ConfigError(f"{path}: not valid {'JSON' if path.suffix == '.json' else 'YAML'}: {exc}") from None
+    raw = load_config_file(path, "calibration config")
     return parse_config(raw, base_dir=path.parent, source=str(path))
 
 
@@ -295,7 +295,8 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         validation=_response(raw["validation"], f"{source}: validation") if raw.get("validation") else None,
         fixed=fixed, model=model, samples=int(design.get("samples", 24)),
         held_out=int(design.get("held_out", 6)), seed=int(design.get("seed", 0)),
-        batch_worlds=int(raw.get("batch_worlds", 8)), device=raw.get("device"), processes=raw.get("processes", "auto"),
+        batch_worlds=_whole_number(raw.get("batch_worlds", 8), f"{source}: batch_worlds"),
+        device=check_device(raw.get("device"), f"{source}: device", present=False), processes=raw.get("processes", "auto"),
         fills=str(raw.get("fills", "independent")),
         output=str(raw.get("output", "results/calibration")), optimisation=dict(raw.get("optimisation") or {}),
         confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
@@ -304,6 +305,23 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
         vtk=vtk, checkpoints=checkpoints, base_dir=base_dir)
     if not cfg.responses:
         raise ConfigError(f"{source}: 'responses' is empty")
+    every = cfg.responses + ([cfg.validation] if cfg.validation else [])
+    names = [r.name for r in every]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ConfigError(f"{source}: response name(s) {twice} given twice (responses and validation): each "
+                          "response's angles are filed under its name, so names must be unique")
+    for resp in every:  # each experiment is built now (name, scale, settings, fill size), not when its DEM starts
+        settings = dict(resp.settings)
+        if model.material is not None and "material" not in settings:
+            settings["material"] = model.material
+        try:
+            exp = make_experiment(resp.experiment, resp.scale, contact_law=model.contact_law, plugins=model.plugins,
+                                  **settings)
+            if exp.material is not None:  # the default (paper) material is checked when its run starts
+                exp.check_size(cfg.batch_worlds * resp.replicates)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: response '{resp.name}': {exc}") from None
     for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
         t = resp.target
         if isinstance(t, Mapping) and isinstance(t.get("dem_at"), Mapping):
@@ -599,8 +617,8 @@ class Campaign:
     # ------------------------------------------------------------------ records
     def _read(self) -> tuple[list[tuple[int, dict]], list[tuple[int, dict]]]:
         """Both record files as ``(line number, record)``; a torn last line is cut off (logged)."""
-        samples = read_records(self.samples_path, self.log)
-        runs = read_records(self.runs_path, self.log)
+        samples = read_records(self.samples_path, self.log, is_campaign_record)
+        runs = read_records(self.runs_path, self.log, is_campaign_record)
         self._sample_records = [rec for _, rec in samples]
         self._run_records = [rec for _, rec in runs]
         return samples, runs
@@ -1061,17 +1079,14 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as exc:
         print(f"warpdem calibrate: configuration error: {exc}", file=sys.stderr)
         return 2
-    if args.device:
-        if str(args.device).startswith("cuda") and not wp.is_cuda_available():
-            print(f"warpdem calibrate: --device {args.device}: no CUDA device here (use cpu)", file=sys.stderr)
-            return 2
-        cfg.device = args.device
     try:
+        cfg.device = check_device(args.device or cfg.device, "--device" if args.device else f"{args.config}: device")
         if args.ray:
             cfg.executor = RayExecutor(address=args.ray)
         out = Path(args.out or cfg.output)
         if args.new_folder:
             out = first_fitting_folder(cfg, out)
+        check_output_folder(out, "--out" if args.out else "output")
         campaign = Campaign(cfg, out, retry_failed=args.retry_failed)
         if args.max_samples is not None:
             t0 = time.perf_counter()

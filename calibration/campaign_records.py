@@ -35,9 +35,10 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from warpdem import ConfigError
+from warpdem.config_io import write_atomic  # noqa: F401 - re-exported: campaign files written whole
 
 __all__ = ["RECORD_FORMAT", "SETUP_LABELS", "append_records", "code_version", "describe_differences",
-           "fingerprint", "plugin_hashes", "read_records", "write_atomic"]
+           "fingerprint", "is_campaign_record", "plugin_hashes", "read_records", "write_atomic"]
 
 RECORD_FORMAT = 2  # 1: records without a fingerprint (refused on resume)
 
@@ -53,6 +54,7 @@ ENGINE_SOURCES: dict[str, tuple[str, ...]] = {
     "calibration": ("experiments/*.py", "filling.py", "materials.py", "model_description.py", "measurement/*.py"),
 }
 SOURCES_LEFT_OUT = {"warpdem/cli.py", "warpdem/pour_demo.py", "warpdem/bench_settled_bed.py",
+                    "warpdem/config_io.py", "warpdem/record_files.py",
                     "calibration/experiments/cli.py", "calibration/experiments/report.py",
                     "calibration/measurement/cli.py", "calibration/measurement/render.py"}
 
@@ -173,35 +175,10 @@ def describe_differences(recorded: Mapping[str, Any], now: Mapping[str, Any], ma
 
 
 # ----------------------------------------------------------------------------- files
-def _fsync_folder(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:  # e.g. a platform without directory handles
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def write_atomic(path: str | os.PathLike, text: str) -> None:
-    """Replace ``path`` by ``text`` so that a reader sees the old or the new file, never a part:
-    write a temporary file in the same folder, flush, fsync, rename over ``path``."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    with open(tmp, "w") as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-    _fsync_folder(path.parent)
-
-
 def append_records(path: str | os.PathLike, records: Iterable[Mapping[str, Any]]) -> None:
     """Append whole JSON lines in one write, then flush and fsync: after a kill the file ends in
-    complete lines or in one torn last line, which :func:`read_records` cuts off."""
+    complete lines or in one torn last line, which :func:`read_records` cuts off. Read the file
+    with :func:`read_records` first: it refuses a file that is not a record file."""
     text = "".join(json.dumps(plain(r)) + "\n" for r in records)
     if not text:
         return
@@ -211,34 +188,65 @@ def append_records(path: str | os.PathLike, records: Iterable[Mapping[str, Any]]
         os.fsync(fh.fileno())
 
 
-def read_records(path: str | os.PathLike, log: Callable[[str], None] = print) -> list[tuple[int, dict[str, Any]]]:
+def is_campaign_record(rec: Mapping[str, Any]) -> bool:
+    """True for a line of ``samples.jsonl`` (``index`` and ``response``) or ``runs.jsonl``
+    (``kind`` and ``response``), of any record format."""
+    return "response" in rec and ("index" in rec or "kind" in rec)
+
+
+def read_records(path: str | os.PathLike, log: Callable[[str], None] = print,
+                 is_record: Callable[[Mapping[str, Any]], bool] | None = None,
+                 key: str = "--out") -> list[tuple[int, dict[str, Any]]]:
     """``(line number, record)`` of every line of a JSON-lines record file (none if it does not
-    exist). A torn last line (an interrupted write) is reported through ``log`` and cut off (the
-    file is rewritten atomically), so its run happens again; a complete last line without its
-    newline gets one. Any other line that is not a JSON object is a ConfigError naming the file
-    and line."""
+    exist). The file must prove it is a record file before anything in it is changed: every
+    complete line a JSON object (and ``is_record`` of it, if given), at least one of them. Then a
+    torn last line (an interrupted write) is reported through ``log``, kept in ``<file>.torn`` and
+    cut off (the file is rewritten atomically), so its run happens again; a complete last line
+    without its newline gets one. Any other file is a ConfigError naming the file, the line and
+    ``key`` (what named the folder), and is left untouched."""
     path = Path(path)
     if not path.exists():
         return []
-    text = path.read_text()
+    hint = f"it was left untouched: move it away, or run into a new output folder ({key} DIR)"
+    if not path.is_file():
+        raise ConfigError(f"{path} is not a file: {hint}")
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path} is not a record file (not UTF-8 text); {hint}") from None
     lines = text.splitlines()
     out: list[tuple[int, dict[str, Any]]] = []
+    bad: list[int] = []  # 0-based indices of lines that are not a JSON object
     for k, line in enumerate(lines):
         if not line.strip():
             continue
         try:
             rec = json.loads(line)
-            if not isinstance(rec, dict):
-                raise ValueError("not a JSON object")
         except ValueError:  # json.JSONDecodeError is a ValueError
-            if k == len(lines) - 1:
-                log(f"{path}: the last line (line {k + 1}) is incomplete: a write was interrupted; it is cut off "
-                    "and its run happens again")
-                write_atomic(path, "".join(ln + "\n" for ln in lines[:k]))
-                return out
-            raise ConfigError(f"{path}: line {k + 1} is not valid JSON (a record is one JSON object per line); the "
-                              "record file is damaged: move it away, or run into a new output folder (--out DIR)") from None
-        out.append((k + 1, rec))
-    if text and not text.endswith("\n"):  # complete last record, newline lost: the next append would join it
+            rec = None
+        if not isinstance(rec, dict):
+            bad.append(k)
+        elif is_record is not None and not is_record(rec):
+            raise ConfigError(f"{path}: line {k + 1} is not a record of this kind: this is not a record file a "
+                              f"warpdem tool wrote; {hint}")
+        else:
+            out.append((k + 1, rec))
+    if bad and not out:
+        raise ConfigError(f"{path}: no line is a JSON record (line {bad[0] + 1} is not one): this is not a record file "
+                          f"a warpdem tool wrote; {hint}")
+    damaged = [k for k in bad if k != len(lines) - 1]
+    if damaged:
+        raise ConfigError(f"{path}: line {damaged[0] + 1} is not valid JSON (a record is one JSON object per line); the "
+                          f"record file is damaged: {hint}")
+    if bad:  # the last line only: a write cut by a kill
+        k = bad[0]
+        log(f"{path}: the last line (line {k + 1}) is incomplete: a write was interrupted; it is cut off "
+            f"(kept in {path.name}.torn) and its run happens again")
+        with open(path.with_name(path.name + ".torn"), "a") as fh:
+            fh.write(lines[k] + "\n")
+        write_atomic(path, "".join(ln + "\n" for ln in lines[:k]))
+        return out
+    if out and not text.endswith("\n"):  # complete last record, newline lost: the next append would join it
         write_atomic(path, text + "\n")
     return out

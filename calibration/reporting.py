@@ -292,5 +292,7 @@ class Report:
         """Write the HTML file (parent folders are created); returns its path."""
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(self.to_html(), encoding="utf-8")
+        from warpdem.config_io import write_atomic
+
+        write_atomic(p, self.to_html())
         return p

@@ -24,7 +24,9 @@ Config keys (SI units; every section optional except what a case needs):
     wall: {youngs_modulus, poisson_ratio, density}
     run: {revolutions, dt, worlds, update_every, record_every, vtk_every, max_contacts,
           steps_per_graph}
-    wear: {archard_k, hardness, finnie_k}
+    wear: {dnv_K, dnv_n, target_density (DNV-RP-O501 steel: 2e-9, 2.6, 7800), archard_k, hardness
+           (Archard: 1e-2, 1.18e9 Pa), finnie_k (0: off), spin_up_revolutions (2: statistics start),
+           block_revolutions (1: one sample per world and revolution)}; see pump/erosion.py
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ import numpy as np
 from warpdem.errors import ConfigError, WarpDEMError
 
 from .design import PumpDesign
-from .geometry import BLADE_ZONES, COMPONENTS, REGIONS, PumpGeometry, blade_camber, build_pump, passage_clearances
+from .geometry import COMPONENTS, REGIONS, PumpGeometry, blade_camber, build_pump, passage_clearances
 
 SECTIONS = {
     "name": None, "device": None, "output": None, "seed": None, "design": None, "geometry": None, "fluid": None,
@@ -61,23 +63,27 @@ DEFAULTS = {
     "wall": {"youngs_modulus": 2.0e11, "poisson_ratio": 0.3, "density": 7850.0},
     "run": {"revolutions": 15.0, "dt": 1.0e-5, "worlds": 1, "update_every": 5.0e-4, "record_every": 2.0e-3,
             "vtk_every": 0.02, "max_contacts": 16, "steps_per_graph": 50, "trajectory_world": 0},
-    "wear": {"archard_k": 1.0e-4, "hardness": 2.0e9, "finnie_k": 5.0e-10},
+    "wear": {"dnv_K": 2.0e-9, "dnv_n": 2.6, "target_density": 7800.0, "archard_k": 1.0e-2, "hardness": 1.18e9,
+             "finnie_k": 0.0, "spin_up_revolutions": 2.0, "block_revolutions": 1.0},
 }
 
 
-def load_config(path_or_dict: str | Path | dict) -> dict:
-    """Read and validate a pump config (YAML path or mapping); fills defaults, names bad keys."""
+#: the most DEM steps a run may take (about 200 times the paper case's): a time step or revolution
+#: count that needs more is refused at load
+MAX_STEPS = 100_000_000
+
+
+def load_config(path_or_dict: str | Path | dict, where: str | None = None) -> dict:
+    """Read and validate a pump config (YAML path or mapping); fills defaults, names bad keys.
+    ``where``: the file a mapping came from, for messages."""
     if isinstance(path_or_dict, dict):
         raw = dict(path_or_dict)
-        where = "config"
+        where = where or "config"
     else:
-        import yaml
+        from warpdem.config_io import load_config_file
 
         p = Path(path_or_dict)
-        if not p.exists():
-            raise ConfigError(f"pump config not found: {p}")
-        with open(p) as fh:
-            raw = yaml.safe_load(fh) or {}
+        raw = load_config_file(p, "pump config") or {}
         if not isinstance(raw, dict):
             raise ConfigError(f"{p}: a pump config must be a mapping of sections")
         where = str(p)
@@ -106,8 +112,9 @@ def load_config(path_or_dict: str | Path | dict) -> dict:
         cfg[sec] = {**defaults, **given}
     run = cfg["run"]
     for k in ("revolutions", "dt", "update_every", "record_every", "vtk_every"):
-        if not (isinstance(run[k], (int, float)) and not isinstance(run[k], bool) and run[k] > 0):
-            problems.append(f"run.{k} must be > 0, got {run[k]!r}")
+        if not (isinstance(run[k], (int, float)) and not isinstance(run[k], bool) and math.isfinite(run[k])
+                and run[k] > 0):
+            problems.append(f"run.{k} must be a finite number > 0, got {run[k]!r}")
     cp = cfg["coupling"]
     if not isinstance(cp["two_way"], bool):
         problems.append(f"coupling.two_way must be true or false, got {cp['two_way']!r}")
@@ -115,10 +122,23 @@ def load_config(path_or_dict: str | Path | dict) -> dict:
             or not (math.isfinite(cp["relaxation"]) and 0 <= cp["relaxation"] <= 100):
         problems.append(f"coupling.relaxation must be a number in [0, 100] (factor on the flow-through rate "
                         f"|u0| / voidage_cell; 0: no decay), got {cp['relaxation']!r}")
+    wr = cfg["wear"]
+    for k in ("dnv_K", "dnv_n", "target_density", "archard_k", "hardness", "block_revolutions"):
+        if isinstance(wr[k], bool) or not isinstance(wr[k], (int, float)) or not wr[k] > 0:
+            problems.append(f"wear.{k} must be > 0, got {wr[k]!r}")
+    for k in ("finnie_k", "spin_up_revolutions"):
+        if isinstance(wr[k], bool) or not isinstance(wr[k], (int, float)) or not wr[k] >= 0:
+            problems.append(f"wear.{k} must be >= 0, got {wr[k]!r}")
     if isinstance(run["worlds"], bool) or not isinstance(run["worlds"], int) or run["worlds"] < 1:
         problems.append(f"run.worlds must be an integer >= 1, got {run['worlds']!r}")
-    if cfg["device"] not in ("cpu", "cuda") and not str(cfg["device"]).startswith("cuda:"):
-        problems.append(f"device must be 'cpu' or 'cuda', got {cfg['device']!r}")
+    try:
+        from warpdem.config_io import check_device
+
+        check_device(cfg["device"], "device", present=False)  # a GPU config loads anywhere; pump_main runs it
+    except ConfigError as exc:
+        problems.append(str(exc))
+    if not problems:
+        problems += _step_count_problems(cfg)
     try:
         g_ok = np.asarray(cfg["gravity"], dtype=float).shape == (3,)
     except (TypeError, ValueError):
@@ -130,6 +150,22 @@ def load_config(path_or_dict: str | Path | dict) -> dict:
     if problems:
         raise ConfigError(f"{where}: {len(problems)} problems:\n" + "\n".join(f"  - {m}" for m in problems))
     return cfg
+
+
+def _step_count_problems(cfg: dict) -> list[str]:
+    """The run's DEM step count against :data:`MAX_STEPS` (none if the design cannot be built: the
+    build reports that)."""
+    try:
+        revolution_time = PumpDesign.from_config(cfg["design"]).revolution_time
+    except (ConfigError, ValueError, TypeError):
+        return []
+    run = cfg["run"]
+    steps = float(run["revolutions"]) * revolution_time / float(run["dt"])
+    if steps <= MAX_STEPS:
+        return []
+    return [f"run: {run['revolutions']:g} revolution(s) of {revolution_time:.3g} s at run.dt = {run['dt']:g} s are "
+            f"{steps:.3g} DEM steps; the limit is {MAX_STEPS:.0e} steps (MAX_STEPS in pump/run.py): raise run.dt "
+            "or run fewer revolutions"]
 
 
 # ----------------------------------------------------------------------------- the case
@@ -164,6 +200,8 @@ def build_case(cfg: dict) -> PumpCase:
     from .coupling import GridFluidForces
     from .flow import PumpFlow
     from .inlet import ParticleInlet, injection_rate, plan_injection
+    from .erosion import ArchardWear, DNVErosion
+    from .regions import pump_regions
     from .wear import ImpactRecorder, WearRecorder
 
     t0 = _time.perf_counter()
@@ -218,19 +256,26 @@ def build_case(cfg: dict) -> PumpCase:
                             voidage_cell=fl["voidage_cell"], two_way=cfg["coupling"]["two_way"],
                             relaxation=float(cfg["coupling"]["relaxation"]))
     b.add_body_force(fluid)
-    impacts = ImpactRecorder(finnie_k=float(cfg["wear"]["finnie_k"]))
+    wcfg = cfg["wear"]
+    impacts = ImpactRecorder(dnv_K=float(wcfg["dnv_K"]), dnv_n=float(wcfg["dnv_n"]), finnie_k=float(wcfg["finnie_k"]))
     b.add_body_force(impacts)
     model = b.finalize(cfg["device"], check_overlaps=False)  # reserve bodies are parked apart
     v_ref = design.u2 + design.inlet_velocity
     sim = wd.Simulation(model, float(run["dt"]), v_ref=v_ref, steps_per_graph=int(run["steps_per_graph"]))
     inlet.attach(sim)
-    recorder = WearRecorder(sim, [0, 1], impacts=impacts, zones={0: imp.zone})
+    regions = pump_regions(geo)
+    dnv = DNVErosion(K=float(wcfg["dnv_K"]), n=float(wcfg["dnv_n"]), density=float(wcfg["target_density"]))
+    archard = ArchardWear(float(wcfg["archard_k"]), float(wcfg["hardness"]))
+    recorder = WearRecorder(sim, [0, 1], impacts=impacts,
+                            regions={0: regions["impeller"], 1: regions["casing"]}, dnv=dnv, archard=archard,
+                            t_start=sim.time)
     case = PumpCase(cfg, design, geo, flow, grid, material, plan, inlet, sim, fluid, impacts, recorder)
     case.timings = {"build_grid_s": t_grid - t0, "build_model_s": _time.perf_counter() - t_grid}
     return case
 
 
 # ----------------------------------------------------------------------------- running
+WEAR_SNAPSHOTS_PER_REVOLUTION = 16
 @dataclass
 class RunRecord:
     """What a run records (world-summed unless noted)."""
@@ -277,6 +322,9 @@ def run_case(case: PumpCase, progress: bool = True, vtk: bool = True, out_dir: P
         upd = max(spg, int(round(upd / spg)) * spg)
     rec_every = max(upd, int(round(float(run["record_every"]) / dt / upd)) * upd)
     vtk_every = max(upd, int(round(float(run["vtk_every"]) / dt / upd)) * upd)
+    # wear snapshots (per world, component and region) 16 times a revolution: the statistics' blocks
+    # end on the snapshot nearest to each revolution (pump.regions.BlockSeries.blocks)
+    wear_every = max(upd, int(round(d.revolution_time / WEAR_SNAPSHOTS_PER_REVOLUTION / dt / upd)) * upd)
     rec = RunRecord()
     tw = int(run["trajectory_world"])
     traj_bodies = case.inlet.body_ids[case.plan.world == tw]
@@ -288,6 +336,7 @@ def run_case(case: PumpCase, progress: bool = True, vtk: bool = True, out_dir: P
         bar = tqdm(total=total, unit="step", desc=f"pump {cfg['name']}", mininterval=2.0)
     t_start = _time.perf_counter()
     case.inlet.update(sim)
+    case.recorder.sample()  # the series start at t = 0 (accumulators zero)
     done = 0
     while done < total:
         n = min(upd, total - done)
@@ -298,6 +347,8 @@ def run_case(case: PumpCase, progress: bool = True, vtk: bool = True, out_dir: P
             bar.update(n)
         if done % rec_every == 0 or done == total:
             _record(case, rec, traj_bodies)
+        if done % wear_every == 0 or done == total:
+            case.recorder.sample()
         if writer is not None and (done % vtk_every == 0 or done == total):
             writer.write_frame(sim.time)
     sim.solver.check()
@@ -318,7 +369,6 @@ def _record(case: PumpCase, rec: RunRecord, traj_bodies: np.ndarray) -> None:
     out, lost = case.inlet.removed_per_world()
     rec.removed_outlet.append(out)
     rec.removed_lost.append(lost)
-    case.recorder.sample()
     q = sim.state.body_q.numpy().astype(np.float64)
     v = sim.state.body_v.numpy().astype(np.float64)
     act = sim.state.body_active.numpy() != 0
@@ -332,59 +382,80 @@ def _record(case: PumpCase, rec: RunRecord, traj_bodies: np.ndarray) -> None:
 
 
 # ----------------------------------------------------------------------------- analysis
+def solids_loading(case: PumpCase) -> dict:
+    """Delivered solids of the run: volume fraction phi = n_dot V_mean / Q and mass fraction
+    phi rho_p / (phi rho_p + (1 - phi) rho_f) (the loading the wear rates are stated at)."""
+    m = case.material
+    v_mean = m.mean_particle_mass / m.particle.density
+    phi = case.plan.rate * v_mean / case.design.flow_rate
+    rho_p, rho_f = m.particle.density, float(case.config["fluid"]["density"])
+    return {"volume_fraction": phi, "mass_fraction": phi * rho_p / (phi * rho_p + (1 - phi) * rho_f),
+            "particles_per_s_per_world": case.plan.rate, "particle_density_kg_m3": rho_p}
+
+
+def analyse_wear(case: PumpCase) -> dict:
+    """Wear metrics with intervals per component and region, the paper's wear findings re-tested,
+    the wear-life sanity check (:mod:`pump.findings`), and the run-end cumulative values."""
+    from .erosion import SECONDS_PER_YEAR
+    from .findings import CASING, REGION_MERGES, retest_findings, table, wear_life_check, window_stats
+    from .wear import METRICS
+
+    d = case.design
+    r = case.recorder
+    wc = case.config["wear"]
+    t_from = float(wc["spin_up_revolutions"]) * d.revolution_time
+    block = float(wc["block_revolutions"]) * d.revolution_time
+    comp = window_stats(r, "component", t_from, block, merge={"casing": CASING})
+    regs = window_stats(r, "region", t_from, block, merge=REGION_MERGES) if r.regions else None
+    cumulative = {kind: {name: r.metric(name, kind) for name in (
+        "impulse_n", "impulse_t", "energy_n", "energy_t", "energy_n_per_area", "energy_t_per_area", "impacts",
+        "edem_cumulative_force_n", "edem_cumulative_force_t")} for kind in (("component", "region") if r.regions
+                                                                         else ("component",))}
+    # the impeller triangle with the most normal energy per area (world mean) and its impacts
+    en = r.per_triangle("energy_n")[case.impeller_wall] / r.areas()[case.impeller_wall]
+    top = int(np.argmax(en)) if en.size else 0
+    top_impacts = r.per_triangle("impacts")[case.impeller_wall][top] * case.sim.model.num_worlds if en.size else 0.0
+    from .regions import REGIONS as WEAR_REGIONS
+
+    top_region = WEAR_REGIONS[r.regions[case.impeller_wall][top]] if r.regions and en.size else "none"
+    return {
+        "definitions": {k: {"unit": u, "definition": t} for k, (u, t) in METRICS.items()},
+        "elapsed_s": r.elapsed, "seconds_per_year": SECONDS_PER_YEAR,
+        "window": {"from_s": comp.t_from, "to_s": comp.t_to, "blocks": comp.blocks, "worlds": comp.worlds,
+                   "samples": comp.blocks * comp.worlds, "spin_up_revolutions": float(wc["spin_up_revolutions"]),
+                   "block_revolutions": float(wc["block_revolutions"])},
+        "solids": solids_loading(case),
+        "erosion_model": {"dnv": {"K": r.dnv.K, "n": r.dnv.n, "target_density": r.dnv.density, "source": r.dnv.source},
+                          "archard": {"wear_coefficient": r.archard.wear_coefficient, "hardness_Pa": r.archard.hardness,
+                                      "source": r.archard.source}},
+        "components": table(comp), "regions": table(regs) if regs is not None else {},
+        "cumulative": cumulative,
+        "impeller_max_normal_energy_triangle": {"region": top_region, "J_per_m2": float(en[top]) if en.size else 0.0,
+                                                "impacts_all_worlds": float(top_impacts)},
+        "findings": retest_findings(comp, regs),
+        "wear_life": wear_life_check(comp, regs, d.blade_thickness),
+    }
+
+
 def analyse(case: PumpCase, rec: RunRecord) -> dict:
-    """Numbers for the report: checks of the fluid model, particle balance, wear per component
-    and the three findings of the seed paper."""
+    """Numbers for the report: checks of the fluid model, particle balance, wear metrics with
+    intervals (:func:`analyse_wear`) and the seed paper's findings."""
     d = case.design
     flow, grid = case.flow, case.grid
     rates = flow.flow_rates(grid.interpolate_velocity)
     h_e = flow.euler_head(grid.interpolate_velocity)
-    r = case.recorder
     worlds = case.sim.model.num_worlds
-    comp_en = r.per_component("energy_n")
-    comp_et = r.per_component("energy_t")
-    cf_avg = r.cumulative_force(average=True)
-    cf_tot = r.cumulative_force(average=False)
-    erosion = r.per_component("erosion")
-    impacts = r.per_component("impacts")
-    n_tri = r.triangles_per_component()
-    areas = r.areas()
-    labs = r.labels()
-    area_comp = {c: float(sum(areas[w][labs[w] == COMPONENTS.index(c)].sum() for w in labs)) for c in n_tri}
-    zone_en = r.blade_zone_totals("energy_n")
-    zone_et = r.blade_zone_totals("energy_t")
-    zone_imp = r.blade_zone_totals("impacts")
-    # impeller: normal energy per area of each zone (blade zones, hub, shroud)
-    density_n = {z: zone_en[z] / zone_en[z + "_area"] for z in BLADE_ZONES[1:] if zone_en.get(z + "_area", 0) > 0}
-    for c in ("hub", "shroud"):
-        density_n[c] = comp_en.get(c, 0.0) / area_comp[c] if area_comp.get(c) else 0.0
-    # where is the impeller's highest normal energy per area (triangle)?
-    en_imp = r.per_triangle("energy_n")[0]
-    dens_tri = en_imp / areas[0]
-    top = int(np.argmax(dens_tri)) if dens_tri.size else 0
-    top_zone = BLADE_ZONES[case.geometry.impeller.zone[top]] if dens_tri.size else "none"
-    top_comp = COMPONENTS[case.geometry.impeller.component[top]] if dens_tri.size else "none"
-    # finding 1: the volute (with its tongue) carries the largest cumulative tangential contact
-    # energy and force (totals over the component: independent of the triangle size)
-    casing_t = comp_et.get("volute", 0.0) + comp_et.get("tongue", 0.0)
-    casing_n = comp_en.get("volute", 0.0) + comp_en.get("tongue", 0.0)
-    imp_t = {c: comp_et.get(c, 0.0) for c in ("shroud", "blade", "hub")}
-    f1_energy = casing_t > max(imp_t.values())
-    ft_tot = cf_tot["tangential"]
-    casing_ft = ft_tot.get("volute", 0.0) + ft_tot.get("tongue", 0.0)
-    f1_force = casing_ft > max(ft_tot.get(c, 0.0) for c in ("shroud", "blade", "hub"))
-    vol_avg_t = cf_avg["tangential"].get("volute", 0.0)
-    tang_share = casing_t / max(casing_t + casing_n, 1e-300)
-    # finding 2: the blade head (leading edge) has the highest normal energy (per area)
-    f2 = bool(density_n) and max(density_n.values()) > 0 and max(density_n, key=density_n.get) == "leading_edge"
+    wear = analyse_wear(case)
     # finding 3: particles in the passage keep to the pressure side (entry: first 30 % of the blade)
     ph = np.concatenate(rec.passage_phase) if rec.passage_phase else np.zeros(0)
     rr = np.concatenate(rec.passage_radius) if rec.passage_radius else np.zeros(0)
     entry = rr < d.r1 + 0.3 * (d.r2 - d.r1)
     ps_all = float(np.mean(ph < 0.5)) if ph.size else float("nan")
     ps_entry = float(np.mean(ph[entry] < 0.5)) if entry.any() else float("nan")
-    ps_contact = zone_en.get("pressure_side", 0.0) + zone_et.get("pressure_side", 0.0)
-    ss_contact = zone_en.get("suction_side", 0.0) + zone_et.get("suction_side", 0.0)
+    reg_en = wear["cumulative"].get("region", {}).get("energy_n", {})
+    reg_et = wear["cumulative"].get("region", {}).get("energy_t", {})
+    ps_contact = reg_en.get("blade_pressure_side", 0.0) + reg_et.get("blade_pressure_side", 0.0)
+    ss_contact = reg_en.get("blade_suction_side", 0.0) + reg_et.get("blade_suction_side", 0.0)
     f3 = bool(ph.size) and ps_entry > 0.5 and ps_contact > ss_contact
     counts = np.asarray(rec.region_counts)
     out_w, lost_w = case.inlet.removed_per_world()
@@ -398,6 +469,15 @@ def analyse(case: PumpCase, rec: RunRecord) -> dict:
     r_mean = (3 * m_mean / (4 * math.pi * pm.density)) ** (1 / 3)
     overlap = (15 * m_mean * v_max**2 / (16 * e_star * math.sqrt(r_mean))) ** 0.4
     injected = case.inlet.injected
+    findings = dict(wear["findings"])
+    findings["particles_enter_along_pressure_side"] = {
+        "verdict": "reproduced" if f3 else "not reproduced", "reproduced": bool(f3),
+        "caveat": "follows from the passage-averaged kinematics of the prescribed analytic flow, so it cannot "
+                  "test the paper's fluid mechanism",
+        "pressure_half_fraction_entry": ps_entry, "pressure_half_fraction_passage": ps_all,
+        "samples_in_passage": int(ph.size), "samples_at_entry": int(entry.sum()),
+        "pressure_side_contact_energy_J": ps_contact, "suction_side_contact_energy_J": ss_contact}
+    wear = {k: v for k, v in wear.items() if k != "findings"}
     return {
         "design": d.summary(),
         "clearances_m": passage_clearances(case.geometry),
@@ -418,35 +498,8 @@ def analyse(case: PumpCase, rec: RunRecord) -> dict:
             "max_normal_impact_speed_m_s": v_max,
             "hertz_overlap_at_max_impact_fraction_of_radius": overlap / r_mean,
         },
-        "wear": {
-            "energy_n_J": comp_en, "energy_t_J": comp_et, "erosion_finnie_m3": erosion, "impacts": impacts,
-            "cumulative_force_avg_N": cf_avg, "cumulative_force_total_N": cf_tot, "triangles": n_tri,
-            "area_m2": area_comp, "impeller_normal_energy_per_area_J_m2": density_n,
-            "blade_zone_energy_n_J": {z: zone_en.get(z, 0.0) for z in BLADE_ZONES[1:]},
-            "blade_zone_energy_t_J": {z: zone_et.get(z, 0.0) for z in BLADE_ZONES[1:]},
-            "blade_zone_impacts": {z: zone_imp.get(z, 0.0) for z in BLADE_ZONES[1:]},
-            "impeller_max_normal_energy_triangle": {"component": top_comp, "zone": top_zone,
-                                                    "J_per_m2": float(dens_tri[top]) if dens_tri.size else 0.0},
-        },
-        "findings": {
-            "volute_wears_most_by_tangential_force": {
-                "reproduced": bool(f1_energy and f1_force),
-                "casing_tangential_energy_J": casing_t, "casing_normal_energy_J": casing_n,
-                "impeller_tangential_energy_J": imp_t,
-                "casing_cumulative_tangential_force_N": casing_ft,
-                "impeller_cumulative_tangential_force_N": {c: ft_tot.get(c, 0.0) for c in ("shroud", "blade", "hub")},
-                "volute_tangential_share_of_energy": tang_share,
-                "volute_avg_cumulative_tangential_force_N": vol_avg_t,
-                "energy_criterion": bool(f1_energy), "force_criterion": bool(f1_force)},
-            "blade_head_highest_normal_energy": {
-                "reproduced": bool(f2), "normal_energy_per_area_J_m2": density_n,
-                "max_triangle": f"{top_comp}/{top_zone}"},
-            "particles_enter_along_pressure_side": {
-                "reproduced": bool(f3), "pressure_half_fraction_entry": ps_entry,
-                "pressure_half_fraction_passage": ps_all, "samples_in_passage": int(ph.size),
-                "samples_at_entry": int(entry.sum()), "pressure_side_contact_energy_J": ps_contact,
-                "suction_side_contact_energy_J": ss_contact},
-        },
+        "wear": wear,
+        "findings": findings,
     }
 
 
@@ -457,21 +510,23 @@ def pump_main(argv: list[str] | None = None) -> int:
     ap.add_argument("config", help="YAML config (pump/configs/quick_pump.yaml, pump/configs/paper_pump.yaml)")
     ap.add_argument("--output", help="output folder (default: the config's 'output')")
     ap.add_argument("--device", help="cpu or cuda (default: the config's)")
-    ap.add_argument("--revolutions", type=float, help="override run.revolutions")
-    ap.add_argument("--worlds", type=int, help="override run.worlds (independent replicates)")
+    ap.add_argument("--revolutions", type=float, help="override run.revolutions (> 0)")
+    ap.add_argument("--worlds", type=int, help="override run.worlds (independent replicates, >= 1)")
     ap.add_argument("--no-vtk", action="store_true", help="skip the VTK time series")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     try:
+        from warpdem.config_io import check_device, check_output_folder
+
         cfg = load_config(args.config)
-        if args.output:
-            cfg["output"] = args.output
-        if args.device:
-            cfg["device"] = args.device
-        if args.revolutions:
-            cfg["run"]["revolutions"] = args.revolutions
-        if args.worlds:
-            cfg["run"]["worlds"] = args.worlds
+        # the command line's values are checked as the file's are (0 revolutions is refused, not ignored)
+        for section, key, value in ((None, "output", args.output), (None, "device", args.device),
+                                    ("run", "revolutions", args.revolutions), ("run", "worlds", args.worlds)):
+            if value is not None:
+                (cfg[section] if section else cfg)[key] = value
+        cfg = load_config(cfg, where=f"{args.config} (with the command line's options)")
+        check_device(cfg["device"], "--device" if args.device is not None else f"{args.config}: device")
+        check_output_folder(cfg["output"], "--output" if args.output is not None else "output")
         return run_config(cfg, progress=not args.no_progress, vtk=not args.no_vtk)
     except (ConfigError, WarpDEMError) as exc:
         print(f"warpdem pump: {exc}", file=sys.stderr)
@@ -529,7 +584,20 @@ def save_json(path: Path, data: dict) -> None:
             return None
         raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
-    path.write_text(json.dumps(data, indent=1, default=conv))
+    def finite(o):  # strict JSON: non-finite floats (an interval of one sample) become null
+        if isinstance(o, dict):
+            return {k: finite(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [finite(v) for v in o]
+        if isinstance(o, np.ndarray):
+            return finite(o.tolist())
+        if isinstance(o, (float, np.floating)) and not math.isfinite(float(o)):
+            return None
+        return o
+
+    from warpdem.config_io import write_atomic
+
+    write_atomic(path, json.dumps(finite(data), indent=1, default=conv, allow_nan=False))
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ def test_diagnosis_reads_only_the_measurement_file_and_resumes_from_its_cache(ti
     out = work / "diagnosis_rolling"
     cache = out / "dem_runs.jsonl"
     n_prefetched = len(cache.read_text().splitlines())
-    assert n_prefetched == 10  # 5 design sets x 2 fills, one world each (one baffle condition)
+    assert n_prefetched == 1 + 10  # the header; 5 design sets x 2 fills, one world each (one baffle condition)
     assert diagnose_main([str(cfg), "--processes", "2"]) == 0
     timing = json.loads((out / "dem_timing.json").read_text())
     assert timing["dem_worlds_run"] >= 2  # the confirmation at the best fit; the design came from the cache

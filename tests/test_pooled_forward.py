@@ -181,16 +181,41 @@ def test_a_torn_dem_cache_line_is_reported_dropped_and_later_appends_stay_readab
     from calibration.model_description import ModelDescription
     from validation.dem_forward import DEMForwardModel
 
+    def record(wid: str) -> dict:
+        return {"id": wid, "experiment": "baffle", "status": "ok", "parameters": {"mu_s_pp": 0.5}, "replicate": 0,
+                "rpm": None, "observables": {"static_angle": 30.0}}
+
     cache = tmp_path / "dem_cache.jsonl"
-    good = [{"id": "a", "values": {"x": 1.0}}, {"id": "b", "values": {"x": 2.0}}]
-    cache.write_text("".join(json.dumps(r) + "\n" for r in good) + '{"id": "c", "val')
+    DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)._store(record("a"))
+    DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)._store(record("b"))
+    assert json.loads(cache.read_text().splitlines()[0])["warpdem_records"] == "warpdem-dem-cache"  # the header
+    with open(cache, "a") as fh:
+        fh.write(json.dumps(record("c"))[:20])
     forward = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)
     assert set(forward._cache) == {"a", "b"}
     assert "1 torn line(s) dropped" in capsys.readouterr().err
-    forward._store({"id": "d", "values": {"x": 4.0}})
+    assert (tmp_path / "dem_cache.jsonl.torn").read_text() == json.dumps(record("c"))[:20] + "\n"  # kept aside
+    forward._store(record("d"))
     again = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)
     assert set(again._cache) == {"a", "b", "d"}
     assert "torn" not in capsys.readouterr().err
+
+
+def test_a_dem_cache_written_before_headers_still_loads_and_its_torn_line_is_cut(tmp_path, capsys):
+    """A cache without the header line is recognised by its records (every JSON line a world's
+    record), so caches written before the header existed keep serving their worlds."""
+    import json
+
+    import warpdem as wd
+    from calibration.model_description import ModelDescription
+    from validation.dem_forward import DEMForwardModel
+
+    recs = [{"id": w, "experiment": "drum", "status": "ok", "parameters": {}, "observables": {}} for w in "ab"]
+    cache = tmp_path / "old.jsonl"
+    cache.write_text("".join(json.dumps(r) + "\n" for r in recs) + '{"id": "c", "exp')
+    forward = DEMForwardModel(ModelDescription(wd.ContactLaw()), None, (), (), cache=cache)
+    assert set(forward._cache) == {"a", "b"} and "1 torn line(s) dropped" in capsys.readouterr().err
+    assert cache.read_text() == "".join(json.dumps(r) + "\n" for r in recs)
 
 
 def test_a_world_found_again_with_round_off_parameters_is_served_from_the_cache(tmp_path):
@@ -214,7 +239,7 @@ def test_a_world_found_again_with_round_off_parameters_is_served_from_the_cache(
     assert near(2e-11)
     assert not near(1e-6)
     assert not near(2e-11, model="another model")
-    assert len((tmp_path / "c.jsonl").read_text().splitlines()) == 1  # an alias is not written again
+    assert len((tmp_path / "c.jsonl").read_text().splitlines()) == 2  # header and record: an alias is not written again
 
 
 class CachedTieModel(CachedAnalyticModel):

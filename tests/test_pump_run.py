@@ -41,14 +41,21 @@ def test_short_run_writes_every_output(tmp_path):
     assert res["particles"]["injected"] == res["particles"]["scheduled"] > 0
     for k, err in res["fluid_checks"]["flow_rate_error"].items():
         assert abs(err) < 0.02, k
-    for name in ("report.md", "report.html", "wear_impeller.vtp", "wear_casing.vtp", "series.npz", "wear_energy.png",
+    for name in ("report.md", "report.html", "wear_regions.png", "wear_impeller.vtp", "wear_casing.vtp", "series.npz", "wear_energy.png",
                  "wear_maps.png", "trajectories.png", "flow_field.png", "force_vs_time.png", "particle_counts.png",
                  "passage_position.png", "vtk/particles.pvd", "vtk/impeller.pvd", "vtk/casing.pvd"):
         assert (tmp_path / name).exists(), name
     import pyvista as pv
 
     wear = pv.read(tmp_path / "wear_impeller.vtp")
-    assert {"energy_n", "energy_t", "archard_depth", "finnie_depth", "component", "blade_zone"} <= set(wear.cell_data)
+    assert {"energy_n", "energy_t", "pressure_n", "pressure_t", "dnv_depth_rate_mm_y", "archard_depth_rate_mm_y",
+            "impacts", "region", "component", "blade_zone"} <= set(wear.cell_data)
+    # one revolution is all spin-up: no samples, so every finding reads "cannot tell", nothing is ranked
+    assert res["wear"]["window"]["samples"] == 0
+    assert {t["verdict"] for f in ("volute_wears_most", "leading_edge_highest_normal_energy")
+            for t in res["findings"][f].values()} == {"cannot tell"}
+    assert not any(r["converged"] for r in res["wear"]["regions"].values())
+    assert "wear_regions.png" in (tmp_path / "report.md").read_text()
     frames = sorted((tmp_path / "vtk").glob("particles_*.vtp"))
     assert len(frames) >= 2
     last = pv.read(frames[-1])
@@ -70,5 +77,6 @@ def test_quick_config_end_to_end(tmp_path):
     assert res["fluid_checks"]["euler_head_grid_m"] == pytest.approx(res["fluid_checks"]["euler_head_design_m"],
                                                                      rel=0.03)
     f = res["findings"]
-    assert f["blade_head_highest_normal_energy"]["reproduced"]
+    assert f["leading_edge_highest_normal_energy"]["per_area"]["verdict"] == "reproduced"
     assert f["particles_enter_along_pressure_side"]["pressure_half_fraction_entry"] > 0.6
+    assert res["wear"]["window"]["samples"] == 10  # 12 revolutions - 2 of spin-up, one world

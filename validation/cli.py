@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from warpdem import ConfigError
+from warpdem.config_io import check_device, check_output_folder, device_arg, processes_arg, write_atomic
 
 __all__ = ["diagnose_main", "build_diagnosis"]
 
@@ -93,6 +94,7 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     from .measurements import load_observations
     from .settings import DiagnosisSettings
 
+    check_device(device or cfg.device, "--device" if device else "device")
     mpath = Path(cfg.measurements)
     if not mpath.is_absolute():
         mpath = base_dir / mpath
@@ -116,6 +118,11 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
         effects = default_effects(desc, material or _preset_material(cfg), ranges)
     else:
         effects = [resolve_effect(t, ranges) for t in cfg.candidates]
+    effect_parameters = {p.name for e in effects for p in e.candidate.parameters}
+    unknown = sorted(set(ranges) - effect_parameters)
+    if unknown:
+        raise ConfigError(f"effect_ranges: {unknown} {'is not a parameter' if len(unknown) == 1 else 'are not parameters'}"
+                          f" of the candidate effects; valid: {sorted(effect_parameters)}")
     names = [e.name for e in effects]
     if len(set(names)) != len(names):
         raise ConfigError(f"candidates: an effect is listed twice: {names}")
@@ -132,15 +139,21 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
             raise ConfigError(f"add: '{a}' is not among the candidate effects {names}")
     specs = []
     for o in observations:
-        settings = condition_settings(o.experiment, dict(o.condition))
+        try:
+            settings = condition_settings(o.experiment, dict(o.condition))
+        except ConfigError as exc:
+            raise ConfigError(f"measurements: {mpath}: experiments.{o.experiment}: {exc}") from None
         specs.append(ObservableSpec(o.key, o.experiment, o.quantity, settings))
     proposals = _proposals(cfg, list(observations))
     specs += [ObservableSpec(p.key, p.experiment, p.quantity, condition_settings(p.experiment, dict(p.condition)))
               for p in proposals]
     # measurements and cache are relative to the config's folder; the output folder (as in
     # `warpdem calibrate`) and --output to the working directory
-    out = output or Path(cfg.output or f"results/diagnosis_{cfg.name}")
+    out = check_output_folder(output or Path(cfg.output or f"results/diagnosis_{cfg.name}"),
+                              "--output" if output else "output")
     cache = _relative(Path(cfg.cache), base_dir) if cfg.cache else out / "dem_runs.jsonl"
+    if not cache.is_dir():  # a folder named as the cache is refused by the cache itself
+        check_output_folder(cache.parent, "cache", "the DEM cache's folder")
     from calibration.executor import executor_from_config
 
     procs = processes if processes is not None else cfg.processes
@@ -149,6 +162,10 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
                               fixed=fixed, device=device or cfg.device, processes=procs, cache=cache,
                               progress=False, proposals=proposals, executor=executor)
+    try:  # every condition's experiment is built now (settings, fill size), not when its DEM starts
+        forward.check_experiments()
+    except ConfigError as exc:
+        raise ConfigError(f"measurements: {mpath}: {exc}") from None
     settings = DiagnosisSettings(**{**cfg.diagnosis.model_dump(), "add": tuple(dict.fromkeys(added))})
     return observations, ParameterSpace(tuple(plist)), [e.candidate for e in effects], forward, settings, out
 
@@ -200,8 +217,8 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("config", nargs="+", help="diagnosis config(s) (YAML), see validation/configs/; several configs "
                     "of the same model (e.g. one per measurement set) run in one process and share DEM launches")
     ap.add_argument("--output", help="output folder (default: the config's 'output')")
-    ap.add_argument("--device", help="cpu or cuda (default: the config's, else cuda if present)")
-    ap.add_argument("--processes", help="CPU worker processes ('auto' = one per core)")
+    ap.add_argument("--device", type=device_arg, help="cpu or cuda (default: the config's, else cuda if present)")
+    ap.add_argument("--processes", type=processes_arg, help="CPU worker processes ('auto' = one per core)")
     ap.add_argument("--ray", metavar="ADDRESS", help="run the DEM batches on a Ray cluster: 'auto' (a running "
                     "cluster), 'local' (start one here) or ray://host:port (overrides the config's executor)")
     ap.add_argument("--add", action="append", default=[], metavar="EFFECT",
@@ -223,9 +240,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     if args.prefetch is not None and len(args.config) > 1:
         print("warpdem diagnose: --prefetch takes one config", file=sys.stderr)
         return 2
-    procs = None
-    if args.processes is not None:
-        procs = args.processes if args.processes == "auto" else int(args.processes)
+    procs = args.processes
     jobs = []
     try:
         for path in args.config:
@@ -279,7 +294,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
                   "diagnoses_in_this_process": [str(j[0]) for j in jobs], "device": str(forward.device or "default"),
                   "designs_up_front": result.forward.get("designs_up_front"),
                   "failed_worlds": getattr(forward, "dem_failures", {})}
-        (out / "dem_timing.json").write_text(json.dumps(timing, indent=1))
+        write_atomic(out / "dem_timing.json", json.dumps(timing, indent=1))
         if len(jobs) > 1:
             print(f"{path}:")
         print(result.headline)

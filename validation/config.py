@@ -35,10 +35,10 @@ import os
 from pathlib import Path
 from typing import Optional, Any, Literal, Union
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from warpdem import ConfigError
+from warpdem.config_io import check_device, load_config_file, parse_processes
 
 __all__ = ["DiagnosisConfig", "load_diagnosis_config", "format_validation_error"]
 
@@ -118,12 +118,13 @@ class DiagnosisConfig(_Strict):
     cache: str | None = None
     progress: bool = True
 
-    @field_validator("processes")
+    @field_validator("processes", mode="before")
     @classmethod
     def _positive_processes(cls, v: Any) -> Any:
-        if isinstance(v, int) and v < 1:
-            raise ValueError("must be >= 1 or 'auto'")
-        return v
+        try:
+            return parse_processes(v, "processes")
+        except ConfigError:
+            raise ValueError("must be a whole number >= 1 or 'auto'") from None
 
     @field_validator("parameters")
     @classmethod
@@ -138,7 +139,7 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
     lines = [f"{source}: {len(exc.errors())} problem(s) in the config:"]
     for e in exc.errors():
         path = ".".join(str(p) for p in e["loc"]) or "(top level)"
-        msg = e["msg"]
+        msg = e["msg"].removeprefix("Value error, ")
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
         lines.append(f"  {path}: {msg} (got {e.get('input')!r})" if e["type"] != "missing" else f"  {path}: missing")
@@ -149,15 +150,12 @@ def load_diagnosis_config(path: str | os.PathLike) -> tuple[DiagnosisConfig, Pat
     """Read and check a diagnosis config; returns (config, folder of the file). Errors are
     :class:`ConfigError` listing every problem with its path."""
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"diagnosis config not found: {p}")
-    try:
-        raw = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: not valid YAML: {exc}") from None
+    raw = load_config_file(p, "diagnosis config")
     if not isinstance(raw, dict):
         raise ConfigError(f"{p}: the top level must be a mapping of keys, got {type(raw).__name__}")
     try:
-        return DiagnosisConfig.model_validate(raw), p.parent
+        cfg = DiagnosisConfig.model_validate(raw)
     except ValidationError as exc:
         raise ConfigError(format_validation_error(exc, str(p))) from None
+    check_device(cfg.device, f"{p}: device", present=False)  # present here: checked when it runs
+    return cfg, p.parent

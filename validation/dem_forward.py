@@ -14,7 +14,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 import sys
 import time
 from dataclasses import dataclass, field
@@ -28,6 +27,7 @@ from calibration.experiments.checkpoints import BatchCheckpoints
 from calibration.materials import BulkMaterial
 from calibration.model_description import ModelDescription
 from warpdem import ConfigError
+from warpdem.record_files import RecordFile
 
 from .dem_effects import DEMEffect, apply_effects
 from .forward import ForwardModel, ProposedMeasurement, replicate_counts
@@ -46,6 +46,17 @@ class ObservableSpec:
     experiment: str
     quantity: str
     settings: Mapping[str, Any] = field(default_factory=dict)
+
+
+#: the DEM cache's format name (its header line, :mod:`warpdem.record_files`)
+CACHE_FORMAT = "warpdem-dem-cache"
+#: keys every DEM-cache record has (a file whose JSON lines lack them is not a DEM cache)
+CACHE_RECORD_KEYS = frozenset({"id", "experiment", "status", "parameters"})
+
+
+def is_cache_record(rec: Mapping[str, Any]) -> bool:
+    """True for a DEM-cache record (a world's result, :meth:`DEMForwardModel._store`)."""
+    return CACHE_RECORD_KEYS <= set(rec) and isinstance(rec["id"], str)
 
 
 #: Parameter sets equal within this relative difference are the same DEM world (float round-off
@@ -129,30 +140,26 @@ class DEMForwardModel(ForwardModel):
         # world's error is in its cache record)
         self.dem_failures: dict[str, dict[str, Any]] = {}
         self.log: list[dict[str, Any]] = []
-        if self.cache_path is not None and self.cache_path.exists():
+        self._cache_file = None if self.cache_path is None else RecordFile(
+            self.cache_path, CACHE_FORMAT, is_cache_record, key="cache", what="DEM cache")
+        if self._cache_file is not None:
             self._load_cache()
 
     def _load_cache(self) -> None:
-        """Read the cache; a torn line (a write cut by an interruption) is reported, dropped from
-        the file (rewritten atomically, so later appends start on a fresh line) and its world re-run."""
-        assert self.cache_path is not None
-        kept: list[str] = []
-        torn = 0
-        for line in self.cache_path.read_text().splitlines():
-            if not line.strip():
-                continue
-            try:
-                rec = json.loads(line)
-                self._cache[rec["id"]] = rec
-                kept.append(line)
-            except (json.JSONDecodeError, KeyError, TypeError):
-                torn += 1
-        if torn:
-            print(f"DEM cache {self.cache_path}: {torn} torn line(s) dropped (a write cut by an interruption); "
-                  "those worlds will be run again", file=sys.stderr, flush=True)
-            tmp = self.cache_path.with_suffix(self.cache_path.suffix + ".tmp")
-            tmp.write_text("".join(k + "\n" for k in kept))
-            os.replace(tmp, self.cache_path)
+        """Read the cache. It must prove it is one (:mod:`warpdem.record_files`: a DEM-cache header,
+        or a file of DEM-cache records written before headers existed); any other file named in
+        ``cache:`` is refused and left untouched. A torn line (a write cut by an interruption) is
+        reported, cut from the file (kept in ``<cache>.torn``; rewritten atomically, so later appends
+        start on a fresh line) and its world is run again."""
+        assert self._cache_file is not None
+        contents = self._cache_file.read()
+        for _, rec in contents.records:
+            self._cache[rec["id"]] = rec
+        if contents.torn:
+            print(f"DEM cache {self.cache_path}: {len(contents.torn)} torn line(s) dropped (a write cut by an "
+                  f"interruption, kept in {self.cache_path.name}.torn); those worlds will be run again",
+                  file=sys.stderr, flush=True)
+            self._cache_file.repair(contents, contents.torn)
 
     # ------------------------------------------------------------------ helpers
     def material_for(self, experiment: str) -> BulkMaterial:
@@ -215,6 +222,23 @@ class DEMForwardModel(ForwardModel):
         names = {p.key for p in self._proposals}
         self._proposals += tuple(p for p in other.proposals() if p.key not in names)
 
+    def check_experiments(self) -> None:
+        """Build the experiment of every observable's condition once, without running it: a setting
+        the experiment refuses (``fill_mass: true``) or a fill larger than the machine can hold
+        (:meth:`calibration.experiments.common.Experiment.check_size`) is a ConfigError naming the
+        observable, before any DEM runs."""
+        seen: set[tuple[str, str]] = set()
+        for key, o in self.observables.items():
+            settings = {k: v for k, v in o.settings.items() if k != "rpm"}
+            group = (o.experiment, json.dumps(settings, sort_keys=True, default=str))
+            if group in seen:
+                continue
+            seen.add(group)
+            try:
+                self._experiment(o.experiment, settings, self.description((), o.experiment), DESIGN_FILLS).check_size()
+            except ConfigError as exc:
+                raise ConfigError(f"observable {key}: {exc}") from None
+
     def _experiment(self, name: str, settings: Mapping[str, Any], desc: ModelDescription, first_fill: int):
         extra = dict(self.experiment_settings.get(name, {}))
         scale = extra.pop("scale", self.scale)
@@ -248,10 +272,8 @@ class DEMForwardModel(ForwardModel):
 
     def _store(self, rec: dict[str, Any]) -> None:
         self._cache[rec["id"]] = rec
-        if self.cache_path is not None:
-            self.cache_path.parent.mkdir(parents=True, exist_ok=True)
-            with open(self.cache_path, "a") as fh:
-                fh.write(json.dumps(rec) + "\n")
+        if self._cache_file is not None:
+            self._cache_file.append([rec])
 
     # ------------------------------------------------------------------ evaluate
     def _groups(self, keys: Sequence[str]) -> dict[tuple[str, str], list[int]]:
@@ -360,7 +382,9 @@ class DEMForwardModel(ForwardModel):
 def condition_settings(experiment: str, condition: Mapping[str, Any]) -> dict[str, Any]:
     """The settings of a measured condition that the experiment knows (rpm for the drum is a
     per-world setting); unknown names are an error naming them."""
-    cls = EXPERIMENTS[experiment]
+    cls = EXPERIMENTS.get(experiment)
+    if cls is None:
+        raise ConfigError(f"unknown experiment {experiment!r}; the DEM can run {sorted(EXPERIMENTS)}")
     known = set(cls.field_names()) | ({"rpm"} if experiment == "drum" else set())
     bad = sorted(set(condition) - known)
     if bad:

@@ -158,6 +158,8 @@ class DiagnosisResult:
 
     def write(self, folder: str | os.PathLike) -> dict[str, Path]:
         """Write ``diagnosis.json``, ``error_history.json``, the figures (PNG) and ``report.html``."""
+        from warpdem.config_io import write_atomic
+
         from .plots import diagnosis_figures
         from .report import build_report
 
@@ -165,7 +167,7 @@ class DiagnosisResult:
         out.mkdir(parents=True, exist_ok=True)
         paths: dict[str, Path] = {}
         paths["json"] = out / "diagnosis.json"
-        paths["json"].write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False), encoding="utf-8")
+        write_atomic(paths["json"], json.dumps(self.to_dict(), indent=1, allow_nan=False))
         paths["error_history_json"] = self.history.write(out / "error_history.json")
         figures = diagnosis_figures(self)
         import matplotlib.pyplot as plt

@@ -41,6 +41,7 @@ from calibration.experiments import make_experiment
 from calibration.materials import BulkMaterial
 from calibration.model_description import contact_law_to_dict
 import warpdem as wd
+from warpdem.config_io import load_config_file, write_atomic
 
 __all__ = ["CASES", "generate_case", "generate_cases", "measure_later", "recommended_measurement", "main"]
 
@@ -181,7 +182,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
             doc["material"] = mat_cfg
         if notes.get(case):
             doc["notes"] = "; ".join(notes[case])
-        (out / f"lab_{case}.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+        write_atomic(out / f"lab_{case}.yaml", yaml.safe_dump(doc, sort_keys=False))
         truth = {"case": case, "words": CASES[case]["words"], "hidden": CASES[case], "parameters": case_parameters(case),
                  "lab_model": {"contact_law": contact_law_to_dict(law),
                                "material": "elongated family over the size range, aspect_ratio per case "
@@ -189,10 +190,10 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                  "scale": scale, "repeats": repeats, "dt_s": dt, "notes": notes.get(case, []), "wall_s_all_cases": wall,
                  "launches": launches,
                  "device": str(device or "default")}
-        (out / f"truth_{case}.json").write_text(json.dumps(truth, indent=1, default=str))
+        write_atomic(out / f"truth_{case}.json", json.dumps(truth, indent=1, default=str))
         cfg = diagnosis_config(case, scale, dt)
         cfg["output"] = str(out / f"diagnosis_{case}")
-        (out / f"diagnose_{case}.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+        write_atomic(out / f"diagnose_{case}.yaml", yaml.safe_dump(cfg, sort_keys=False))
     return {"cases": cases, "wall_s": wall, "launches": launches}
 
 
@@ -233,7 +234,7 @@ def measure_later(truth_path: Path, lab_path: Path, out_path: Path, experiment: 
     case, scale = truth["case"], truth["scale"]
     repeats = int(repeats or truth.get("repeats", 3))
     dt = dt if dt is not None else truth.get("dt_s")  # the lab's fixed step, where it recorded one
-    doc = yaml.safe_load(Path(lab_path).read_text())
+    doc = load_config_file(lab_path, "measurement file")
     known = doc.get("experiments", {}).get(experiment, {}).get("conditions", {})
     if condition in known:
         raise ValueError(f"{lab_path} already holds {experiment}/{condition}; name the new condition differently")
@@ -248,7 +249,7 @@ def measure_later(truth_path: Path, lab_path: Path, out_path: Path, experiment: 
         doc["notes"] = "; ".join(filter(None, [doc.get("notes"), *notes[case]]))
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    out_path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    write_atomic(out_path, yaml.safe_dump(doc, sort_keys=False))
     return {"case": case, "condition": f"{experiment}/{condition}", "observables": got["observables"],
             "wall_s": round(time.perf_counter() - t0, 1), "launches": launches}
 

@@ -112,7 +112,9 @@ class ErrorHistory:
     def write(self, path: str | os.PathLike) -> Path:
         p = Path(path)
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(self.to_json(), encoding="utf-8")
+        from warpdem.config_io import write_atomic
+
+        write_atomic(p, self.to_json())
         return p
 
     @classmethod

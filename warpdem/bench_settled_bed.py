@@ -32,6 +32,7 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
+from warpdem.config_io import device_arg, positive_int_arg
 from warpdem.solver import (DEFAULT_FUSED_PLACEMENT, DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT,
                             DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_CANDIDATES, DEFAULT_WALL_STAGE,
                             NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
@@ -249,12 +250,13 @@ def settle_and_time(sim: wd.Simulation, device: str, settle_time: float, warmup:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--spheres", type=int, default=20000, help="spheres per world")
-    ap.add_argument("--worlds", type=int, default=1)
-    ap.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present)")
+    ap = argparse.ArgumentParser(prog="warpdem bench", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--spheres", type=positive_int_arg, default=20000, help="spheres per world")
+    ap.add_argument("--worlds", type=positive_int_arg, default=1)
+    ap.add_argument("--device", type=device_arg, default=None, help="cpu or cuda (default: cuda if present)")
     ap.add_argument("--rolling", default="epsd", choices=["none", "cdt", "epsd"])
-    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--steps", type=positive_int_arg, default=2000)
     ap.add_argument("--warmup", type=int, default=200)
     ap.add_argument("--settle-time", type=float, default=3.0, help="max simulated settling time [s]")
     ap.add_argument("--max-contacts", type=int, default=12)

@@ -8,9 +8,13 @@ installed package can add one the same way.
 """
 from __future__ import annotations
 
+import os
 import sys
+import traceback
 from importlib import metadata
 from typing import Callable, Sequence
+
+from .errors import WarpDEMError
 
 COMMAND_GROUP = "warpdem.commands"
 
@@ -70,7 +74,61 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ImportError, AttributeError) as exc:
         print(f"warpdem {cmd}: cannot load {found[cmd].value} ({exc})", file=sys.stderr)
         return 2
-    rc = fn(rest)
+    return run_command(cmd, fn, rest)
+
+
+#: set this environment variable to 1 for the traceback of every error, a user's mistake too
+TRACEBACK_ENV = "WARPDEM_TRACEBACK"
+#: exit status of a user's mistake (a bad config, option or file): one message, no traceback
+USAGE_ERROR = 2
+#: exit status of a bug: the traceback and a line saying so
+INTERNAL_ERROR = 1
+
+
+def user_error_message(exc: BaseException) -> str | None:
+    """The message for an exception that is a user's mistake or the machine's limit, None for a bug.
+
+    A user's mistake: :class:`~warpdem.errors.ConfigError` (every config, option and input-file
+    check raises it, the measurement files' errors too), another :class:`~warpdem.errors.WarpDEMError`
+    (a time step above the stability limit, too few contact slots, overlapping input), a file
+    that cannot be read or written (``OSError``), a file that is not UTF-8 text, and running out
+    of memory."""
+    if isinstance(exc, WarpDEMError):
+        return str(exc)
+    if isinstance(exc, UnicodeDecodeError):
+        return f"a file is not UTF-8 text ({exc}): is it the right file? save it as UTF-8"
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        return f"{where}{exc.strerror or exc}"
+    if isinstance(exc, MemoryError):
+        return "out of memory: the run needs more memory than this machine has; run fewer worlds or smaller fills"
+    return None
+
+
+def run_command(name: str, fn: Callable[[list[str]], int | None], args: list[str]) -> int:
+    """Run one subcommand inside the command line's error boundary: its exit status; a user's
+    mistake (:func:`user_error_message`) prints one message naming it and gives 2; Ctrl-C gives
+    130; anything else is a bug: its traceback, a line saying so, and 1."""
+    try:
+        rc = fn(args)
+    except SystemExit as exc:  # argparse: --help (0) or a refused option (2, its message printed)
+        if exc.code is None or isinstance(exc.code, int):
+            return int(exc.code or 0)
+        print(f"warpdem {name}: {exc.code}", file=sys.stderr)
+        return USAGE_ERROR
+    except KeyboardInterrupt:
+        print(f"warpdem {name}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the boundary: every exception ends here
+        message = user_error_message(exc)
+        if os.environ.get(TRACEBACK_ENV) == "1" or message is None:
+            traceback.print_exc()
+        if message is None:
+            print(f"warpdem {name}: internal error ({type(exc).__name__}): this is a bug in warpdem, not a mistake "
+                  "in your input; please report it with the traceback above", file=sys.stderr)
+            return INTERNAL_ERROR
+        print(f"warpdem {name}: {message}", file=sys.stderr)
+        return USAGE_ERROR
     return int(rc) if isinstance(rc, int) else 0
 
 

@@ -11,6 +11,7 @@ from xml.sax.saxutils import escape as xml_escape
 
 import numpy as np
 
+from .config_io import write_atomic
 from .contact.law import ContactLaw
 from .errors import ConfigError
 from .materials import Material
@@ -118,7 +119,7 @@ def write_pvd(path: str | os.PathLike, entries: list[tuple[float, str]]) -> Path
               for t, f in entries]
     lines += ["  </Collection>", "</VTKFile>", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines))
+    write_atomic(path, "\n".join(lines))  # rewritten at every frame: a kill leaves the last whole index
     return path
 
 

@@ -19,6 +19,7 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
+from warpdem.config_io import check_output_folder, device_arg, positive_int_arg
 from warpdem.io import write_vtk
 
 
@@ -35,14 +36,16 @@ def loose_fill(n: int, lower, upper, d: float, rng) -> np.ndarray:
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--spheres", type=int, default=2000)
-    ap.add_argument("--device", default=None, help="cpu or cuda (default: cuda if present, else cpu)")
+    ap = argparse.ArgumentParser(prog="warpdem pour", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--spheres", type=positive_int_arg, default=2000)
+    ap.add_argument("--device", type=device_arg, default=None, help="cpu or cuda (default: cuda if present, else cpu)")
     ap.add_argument("--out", default="out/pour_box", help="output folder for VTK files")
-    ap.add_argument("--frames", type=int, default=20, help="VTK frames to write")
+    ap.add_argument("--frames", type=positive_int_arg, default=20, help="VTK frames to write")
     ap.add_argument("--mu", type=float, default=0.5, help="sliding friction (particle-particle and -wall)")
     ap.add_argument("--mu-r", type=float, default=0.1, help="rolling friction (EPSD)")
     args = ap.parse_args(argv)
+    check_output_folder(args.out, "--out")
     wp.config.quiet = True
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     d, rng = 0.018, np.random.default_rng(1)

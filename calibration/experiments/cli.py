@@ -24,6 +24,8 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from warpdem import ConfigError
+from warpdem.config_io import (check_device, check_output_folder, device_arg, load_config_file, parse_processes,
+                               processes_arg, write_atomic)
 
 from . import EXPERIMENTS, ExperimentResult, make_experiment
 
@@ -36,17 +38,7 @@ CONFIG_KEYS = ("experiment", "scale", "device", "processes", "output", "material
 def load_config(path: str | os.PathLike) -> dict[str, Any]:
     """Read a YAML or JSON experiment config and check its top-level keys."""
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"experiment config {str(p)!r} does not exist")
-    text = p.read_text()
-    import yaml
-
-    try:
-        cfg = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{p}: not valid {'JSON' if p.suffix.lower() == '.json' else 'YAML'}: "
-                          f"{' '.join(str(exc).split())}") from None
-    cfg = check_config(cfg, str(p))
+    cfg = check_config(load_config_file(p, "experiment config"), str(p))
     cfg["_base_dir"] = str(p.parent)
     problems = deeper_problems(cfg)
     if problems:
@@ -89,6 +81,10 @@ def deeper_problems(cfg: Mapping[str, Any]) -> list[str]:
         except ConfigError as exc:
             problems.append(f"parameters: {exc}")
         else:
+            try:  # the fill's size against the machine, for every world of the run
+                exp.check_size(len(sets))
+            except ConfigError as exc:
+                problems.append(str(exc))
             specs = model.parameter_specs(exp.bulk_material())  # per pair type (mu_s_pp, ...) and shape
             for w, ps in enumerate(sets):
                 for name, value in ps.items():
@@ -124,6 +120,12 @@ def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
     for k in ("contact_law", "plugins"):
         if k in settings:
             problems.append(f"put '{k}' at the top level, not in 'settings'")
+    for check in (lambda: check_device(cfg.get("device"), "device", present=False),  # present: checked at the run
+                  lambda: parse_processes(cfg.get("processes"), "processes")):
+        try:
+            check()
+        except ConfigError as exc:
+            problems.append(str(exc))
     if len(problems) == 1:
         raise ConfigError(f"{source}: {problems[0]}")
     if problems:
@@ -250,10 +252,10 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="warpdem experiment", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("config", help="YAML or JSON experiment config")
-    ap.add_argument("--device", help="override the config's device (cpu, cuda, cuda:0)")
+    ap.add_argument("--device", type=device_arg, help="override the config's device (cpu, cuda, cuda:0)")
     ap.add_argument("--output", help="override the config's output directory")
     ap.add_argument("--progress", action="store_true", help="print protocol phases to stderr")
-    ap.add_argument("--processes", default=None,
+    ap.add_argument("--processes", default=None, type=processes_arg,
                     help="CPU only: split the worlds over N processes ('auto': one per core; default: the "
                          "config's 'processes', else auto)")
     ap.add_argument("--no-plots", action="store_true", help="do not write the per-world pictures")
@@ -265,6 +267,8 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
         if settings.get("vtk_every") is not None and settings.get("vtk_folder") is None:
             settings["vtk_folder"] = str(Path(out_dir) / "vtk")  # the VTK series follows --output
             cfg["settings"] = settings
+        check_device(args.device or cfg.get("device"), "--device" if args.device else f"{args.config}: device")
+        check_output_folder(out_dir, "--output" if args.output else "output")
         results, exp = run_config(cfg, device=args.device, progress=args.progress or None, processes=args.processes)
     except ConfigError as exc:
         print(f"warpdem experiment: configuration error: {exc}", file=sys.stderr)
@@ -273,7 +277,7 @@ def experiment_main(argv: Sequence[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     doc = {"config": cfg, "config_file": str(args.config), "experiment": exp.name, "scale": exp.scale,
            "results": [r.to_dict() for r in results]}
-    (out / "results.json").write_text(json.dumps(doc, indent=1))
+    write_atomic(out / "results.json", json.dumps(doc, indent=1))
     if not args.no_plots:
         for r in results:
             plot_result(r, out / f"world_{r.world:03d}.png")

@@ -41,6 +41,12 @@ __all__ = ["BatchCheckpoints", "Experiment", "ExperimentResult", "RunContext", "
            "normalize_parameter_sets", "rectangle", "fit_to_dict"]
 
 G = 9.81
+#: the most particles one world's fill may hold (the paper-scale fills hold 750 to 1800): a larger
+#: fill is refused when the experiment is built, before any DEM (:meth:`Experiment.check_size`)
+MAX_PARTICLES_PER_WORLD = 200_000
+#: memory one sphere of a world takes at most, all buffers together [bytes] (state, contact and
+#: neighbour slots, fill generation): with the sphere count, the memory estimate of a world
+BYTES_PER_SPHERE = 4096
 
 
 # --------------------------------------------------------------------------- meshes
@@ -283,16 +289,42 @@ class Experiment:
     def validate(self) -> None:
         """Experiment-specific checks (override)."""
 
+    def check_size(self, worlds: int = 1) -> dict[str, float]:
+        """Estimate one world's fill (particles, spheres, memory [bytes]) and refuse (ConfigError)
+        a fill above :data:`MAX_PARTICLES_PER_WORLD` or ``worlds`` of them above the memory of this
+        machine, naming the setting, the estimate and the limit. No DEM runs."""
+        material = self.bulk_material()
+        amount = self.fill_amount(material)
+        particles = float(amount["n"]) if "n" in amount else float(amount["mass"]) / material.mean_particle_mass
+        per_particle = 1.0 if material.is_spheres else float(sum(f * len(t.radii) for t, f in material.clumps))
+        spheres = particles * per_particle
+        memory = spheres * BYTES_PER_SPHERE * max(1, int(worlds))
+        setting = "fill_mass" if "mass" in amount and hasattr(self, "fill_mass") else "the fill"
+        given = f"{setting} = {getattr(self, 'fill_mass'):g} kg" if setting == "fill_mass" else setting
+        if particles > MAX_PARTICLES_PER_WORLD:
+            raise ConfigError(f"{self.name}: {given} makes about {particles:.3g} particles ({spheres:.3g} spheres, "
+                              f"~{spheres * BYTES_PER_SPHERE / 1e9:.3g} GB) per world; the limit is "
+                              f"{MAX_PARTICLES_PER_WORLD} particles per world (MAX_PARTICLES_PER_WORLD in "
+                              "calibration/experiments/common.py; the paper fills hold 750 to 1800): give a smaller "
+                              f"{setting}")
+        total = _machine_memory()
+        if total and memory > total:
+            raise ConfigError(f"{self.name}: {given} in {worlds} world(s) needs about {memory / 1e9:.3g} GB "
+                              f"({spheres:.3g} spheres per world at {BYTES_PER_SPHERE} bytes each); this machine "
+                              f"has {total / 1e9:.3g} GB: give a smaller {setting} or fewer worlds per batch")
+        return {"particles": particles, "spheres": spheres, "memory_bytes": memory}
+
     def _check_positive(self, *names: str) -> None:
         for n in names:
             v = getattr(self, n)
-            if v is None or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"{self.name}: {n} must be a positive finite number (SI units), got {v!r}")
+            if v is None or isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"{self.name}: {n} must be a positive finite number (SI units), got {v!r}"
+                                  + _yaml_number_hint(v))
 
     def _check_nonnegative(self, *names: str) -> None:
         for n in names:
             v = getattr(self, n)
-            if v is None or not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+            if v is None or isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"{self.name}: {n} must be a finite number >= 0, got {v!r}")
 
     def _check_range(self, name: str, lo_hi_within: tuple[float, float] | None = None) -> None:
@@ -485,6 +517,7 @@ class Experiment:
         if isinstance(executor, LocalExecutor):
             processes, executor = executor.processes, None
         n_sets = len(parameter_sets) if isinstance(parameter_sets, Sequence) else 1
+        self.check_size(n_sets)  # a fill the machine cannot hold is refused before any DEM
         ck = checkpoints if self.vtk_every is None else None
         on_gpu = str(device if device is not None else _preferred_device()).startswith("cuda")
         nproc = executor.task_count(n_sets, on_gpu) if executor is not None else cpu_processes(processes, device)
@@ -662,6 +695,25 @@ def _material_key(m: BulkMaterial) -> Any:
         return hash(m)
     except TypeError:
         return id(m)
+
+
+def _yaml_number_hint(value: Any) -> str:
+    """A hint for a number that YAML read as text (``1.0e6``: YAML 1.1 needs ``1.0e+6``)."""
+    if isinstance(value, str):
+        try:
+            float(value)
+        except ValueError:
+            return ""
+        return " (text, not a number: YAML reads 1.0e6 as text; write 1.0e+6 or 1000000.0)"
+    return ""
+
+
+def _machine_memory() -> int | None:
+    """Physical memory of this machine [bytes] (None where the platform does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
 
 
 def cpu_processes(processes: int | str | None, device: str | None) -> int:

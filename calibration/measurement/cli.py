@@ -240,6 +240,19 @@ def measure_main(argv: Sequence[str] | None = None) -> int:
         if given is not None and not Path(given).is_file():
             print(f"warpdem measure: no such file: {given!r}", file=sys.stderr)
             return 2
+    if a.json_out:  # checked before anything is measured
+        target = Path(a.json_out)
+        if target.is_dir():
+            print(f"warpdem measure: --json {a.json_out}: a folder; give a file name", file=sys.stderr)
+            return 2
+        if not target.parent.is_dir():
+            print(f"warpdem measure: --json {a.json_out}: the folder {str(target.parent)!r} does not exist; create it "
+                  "or give a path in an existing folder", file=sys.stderr)
+            return 2
+        if not os.access(target.parent, os.W_OK):
+            print(f"warpdem measure: --json {a.json_out}: the folder {str(target.parent)!r} is not writable",
+                  file=sys.stderr)
+            return 2
     try:
         out = _clean(_run(a))
     except MeasurementFileError as e:  # the user's file is malformed: a usage error, not a failed measurement
@@ -253,8 +266,9 @@ def measure_main(argv: Sequence[str] | None = None) -> int:
     text = json.dumps(out, indent=2)
     print(text)
     if a.json_out:
-        with open(a.json_out, "w", encoding="utf-8") as fh:
-            fh.write(text + "\n")
+        from warpdem.config_io import write_atomic
+
+        write_atomic(a.json_out, text + "\n")
     return 0
 
 

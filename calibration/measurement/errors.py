@@ -7,13 +7,16 @@ of these instead of returning a number.
 
 from __future__ import annotations
 
+from warpdem.errors import ConfigError
+
 
 class MeasurementError(ValueError):
     """An angle could not be measured from the given data or image."""
 
 
-class MeasurementFileError(MeasurementError):
-    """A measurement file (YAML/JSON) is malformed.
+class MeasurementFileError(MeasurementError, ConfigError):
+    """A measurement file (YAML/JSON) is malformed (a :class:`~warpdem.errors.ConfigError` too: the
+    user's input is wrong).
 
     Attributes:
         file: path of the offending file (or ``"<mapping>"`` for in-memory data).

@@ -994,16 +994,29 @@ def load_measurements(path: str | os.PathLike, *, experiments: "Mapping[str, Any
     experiments; or a mapping, see :func:`check_settings`; None: no check); ``build``: also
     build every condition's experiment (see :func:`check_settings`).
     """
+    from warpdem.config_io import DuplicateKeyError, parse_json, parse_yaml
+    from warpdem.errors import ConfigError
+
     path = os.fspath(path)
     try:
-        with open(path, encoding="utf-8") as fh:
-            text = fh.read()
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except OSError as e:
         raise MeasurementFileError(path, "", f"cannot read: {e}") from e
     try:
-        data = json.loads(text) if path.lower().endswith(".json") else yaml.safe_load(text)
-    except (yaml.YAMLError, json.JSONDecodeError) as e:
-        raise MeasurementFileError(path, "", f"not valid {'JSON' if path.lower().endswith('.json') else 'YAML'}: {e}") from e
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise MeasurementFileError(path, "", f"not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}): is it "
+                                             "the right file? save it as UTF-8") from None
+    try:
+        data = parse_json(text, path) if path.lower().endswith(".json") else parse_yaml(text, path)
+    except DuplicateKeyError as e:
+        at = f"line {e.line}: " if e.line is not None else ""
+        first = f" (first on line {e.first_line})" if e.first_line is not None else ""
+        raise MeasurementFileError(path, str(e.key), f"{at}given twice in one mapping{first}; the second would "
+                                                     "silently replace the first: keep one") from None
+    except ConfigError as e:  # not valid YAML / JSON (the message names the file)
+        raise MeasurementFileError(path, "", str(e).removeprefix(f"{path}: ")) from None
     return parse_measurements(data, file=path, base_dir=os.path.dirname(os.path.abspath(path)),
                               experiments=experiments, build=build)
 
