@@ -81,7 +81,7 @@ def clean_registry():
 
 def test_builtins_found_by_scanning_the_package():
     assert {"hertz_mindlin", "none", "rolling", "cohesion"} <= set(contact.BUILTIN_MODULES)
-    assert contact.available("cohesion") == ["none", "sjkr", "sjkr2", "sjkr2_liggghts", "sjkr_liggghts"]
+    assert contact.available("cohesion") == ["none", "sjkr", "sjkr2", "sjkr2_reduced", "sjkr_reduced"]
     assert contact.available("rolling") == ["cdt", "cdt_liggghts", "epsd", "epsd2", "none"]
 
 

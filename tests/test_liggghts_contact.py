@@ -12,7 +12,8 @@ limit of ``sjkr``) must still show their documented difference, so that
 missing.
 
 The closed-form tests at the end need no LIGGGHTS: they pin down what the LIGGGHTS variants
-``hertz_liggghts``, ``cdt_liggghts`` and ``sjkr_liggghts`` change (LIGGGHTS-PUBLIC 3.8
+``hertz_liggghts`` and ``cdt_liggghts`` change, and what ``sjkr`` (LIGGGHTS' default) and
+``sjkr_reduced`` (``tangential_reduce on``) differ in (LIGGGHTS-PUBLIC 3.8
 src/surface_model_default.h, src/rolling_model_cdt.h, src/cohesion_model_sjkr.h).
 """
 import math
@@ -97,12 +98,12 @@ def _hertz(delta: float) -> float:
     return 4.0 / 3.0 * E_STAR * math.sqrt(R * delta) * delta
 
 
-@pytest.mark.parametrize("cohesion,sees", [("sjkr", True), ("sjkr_liggghts", False)])
-def test_friction_limit_sees_cohesion_only_with_sjkr(warpdem_kernels, cohesion, sees):
+@pytest.mark.parametrize("cohesion,sees", [("sjkr_reduced", True), ("sjkr", False)])
+def test_friction_limit_sees_cohesion_only_with_sjkr_reduced(warpdem_kernels, cohesion, sees):
     """A sphere sliding on the floor with k = 1e5 J/m^3: the normal force is Hertz - k A either
-    way; the friction force is mu |Hertz - k A| for ``sjkr`` (LIGGGHTS tangential_reduce on)
-    and mu Hertz for ``sjkr_liggghts`` (LIGGGHTS 3.8's default). Here k A = 0.81 Hertz, so the
-    two differ by a factor 5."""
+    way; the friction force is mu |Hertz - k A| for ``sjkr_reduced`` (LIGGGHTS tangential_reduce
+    on) and mu Hertz for ``sjkr`` (LIGGGHTS 3.8's default). Here k A = 0.81 Hertz, so the two
+    differ by a factor 5."""
     k, mu = 1.0e5, 0.3
     law = wd.ContactLaw(normal="hertz_liggghts", rolling="epsd2", cohesion=cohesion)
     f, _, delta = _pressed_sphere(law, velocity=SLIDE, mu_s_pw=mu, mu_r_pw=0.0, cohesion_energy_density_pw=k)

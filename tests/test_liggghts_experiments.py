@@ -58,10 +58,12 @@ def test_walls_are_the_builders_meshes_and_the_stl_holds_their_triangles(make):
 def test_law_keywords_and_parameter_table():
     assert liggghts_model_keywords(wd.ContactLaw(rolling="none")) == "model hertz tangential history"
     assert liggghts_model_keywords(wd.ContactLaw(rolling="epsd2", cohesion="sjkr")) == \
-        "model hertz tangential history cohesion sjkr rolling_friction epsd2 tangential_reduce on"
-    assert liggghts_model_keywords(wd.ContactLaw(rolling="epsd2", cohesion="sjkr"), tangential_reduce=False).endswith(
-        "tangential_reduce off")
-    assert liggghts_model_keywords(wd.ContactLaw(rolling="cdt", cohesion="sjkr2")).endswith("cohesion sjkr2 rolling_friction cdt tangential_reduce on")
+        "model hertz tangential history cohesion sjkr rolling_friction epsd2 tangential_reduce off"
+    assert liggghts_model_keywords(wd.ContactLaw(rolling="epsd2", cohesion="sjkr"), tangential_reduce=True).endswith(
+        "tangential_reduce on")
+    assert liggghts_model_keywords(wd.ContactLaw(rolling="cdt", cohesion="sjkr2")).endswith("cohesion sjkr2 rolling_friction cdt tangential_reduce off")
+    assert liggghts_model_keywords(wd.ContactLaw(rolling="cdt", cohesion="sjkr2_reduced")).endswith(
+        "cohesion sjkr2 rolling_friction cdt tangential_reduce on")
     exp = BaffleBox.from_config("quick", contact_law=wd.ContactLaw(rolling="epsd2", cohesion="sjkr"))
     table = contact_parameter_table(exp, {**FRICTION, "mu_r_pp": 0.2, "cohesion_energy_density_pw": 1e5})
     assert table["restitution_pp"] == table["restitution_pw"] == 0.6  # the experiment's contact_defaults

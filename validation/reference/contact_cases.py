@@ -93,7 +93,7 @@ class ContactCase:
     warpdem's normal and tangential sub-models (LIGGGHTS always runs ``hertz`` and ``history``;
     ``hertz_liggghts`` is Hertz with LIGGGHTS' wall contact point); ``warpdem_rolling`` and
     ``warpdem_cohesion`` name another warpdem sub-model than the LIGGGHTS one (e.g.
-    ``cdt_liggghts``, ``sjkr_liggghts``: the variants that follow LIGGGHTS' definitions).
+    ``cdt_liggghts``: the variants that follow LIGGGHTS' definitions; ``sjkr_reduced``: LIGGGHTS' ``tangential_reduce on``).
     ``tangential_reduce`` appends that LIGGGHTS cohesion keyword (``on``/``off``; None:
     LIGGGHTS' default, off).
 
@@ -688,8 +688,8 @@ NOTE_WALL_POINT = ("warpdem 'hertz' puts a wall contact's point on the wall (lev
                    "overlap (r - delta/2); 'hertz_liggghts' follows LIGGGHTS")
 NOTE_CDT = ("warpdem 'cdt' is EDEM's rolling friction (total F_n, lever = distance to the contact point, reversal "
             "guard); LIGGGHTS cdt uses the elastic k_n delta and R*; 'cdt_liggghts' follows LIGGGHTS")
-NOTE_REDUCE = ("warpdem 'sjkr' lets the friction and rolling limits see the cohesion (LIGGGHTS tangential_reduce on); "
-               "LIGGGHTS 3.8's default (off) leaves it out; 'sjkr_liggghts' follows the default")
+NOTE_REDUCE = ("warpdem 'sjkr_reduced' lets the friction and rolling limits see the cohesion (LIGGGHTS "
+               "tangential_reduce on); LIGGGHTS 3.8's default (off), and warpdem's 'sjkr', leave it out")
 NOTE_EPSD = ("warpdem 'epsd' caps the rolling torque at mu_r R* max(F_n, 0) (Ai et al. 2011), LIGGGHTS epsd at "
              "mu_r R* |F_n|: they differ once damping makes F_n negative at the end of an impact")
 NOTE_MINDLIN = ("warpdem 'mindlin' caps spring + dashpot at mu F_n and resets the spring (Luding 2008); LIGGGHTS "
@@ -699,8 +699,8 @@ NOTE_MINDLIN = ("warpdem 'mindlin' caps spring + dashpot at mu F_n and resets th
 def _cases() -> tuple[ContactCase, ...]:
     """The comparison set. Cases named ``...-default`` run warpdem's default sub-model where a
     LIGGGHTS variant exists (``hertz`` for ``hertz_liggghts``, ``cdt`` for ``cdt_liggghts``,
-    ``sjkr`` for ``sjkr_liggghts``); ``...-reduce_on`` runs LIGGGHTS with ``tangential_reduce
-    on`` against warpdem's ``sjkr``. Cases with ``expect_agreement`` False document a known
+    ``sjkr_reduced`` against LIGGGHTS' default ``sjkr``); ``...-reduce_on`` runs LIGGGHTS with
+    ``tangential_reduce on`` against warpdem's ``sjkr_reduced``. Cases with ``expect_agreement`` False document a known
     difference of definitions (``note``); the others are held to :data:`TOLERANCES`."""
     k, mu_r = COHESION, ROLLING_FRICTION
     lg = {"warpdem_normal": "hertz_liggghts"}  # LIGGGHTS' wall contact point (irrelevant between spheres)
@@ -754,16 +754,17 @@ def _cases() -> tuple[ContactCase, ...]:
     coh = {"cohesion": "sjkr", "cohesion_energy_density": k}
     for partner, tag in (("wall", "pw"), ("sphere", "pp")):
         cases.append(impact(f"oblique45_epsd2_sjkr_{tag}", partner, 45, speed=0.5, rolling="epsd2",
-                            rolling_friction=mu_r, warpdem_cohesion="sjkr_liggghts", **coh, **lg))
+                            rolling_friction=mu_r, **coh, **lg))
     cases += [
         impact("oblique45_epsd2_sjkr_pp-reduce_on", "sphere", 45, speed=0.5, rolling="epsd2", rolling_friction=mu_r,
-               tangential_reduce=True, **coh, **lg),
+               tangential_reduce=True, warpdem_cohesion="sjkr_reduced", **coh, **lg),
         impact("oblique45_epsd2_sjkr_pp-default", "sphere", 45, speed=0.5, rolling="epsd2", rolling_friction=mu_r,
-               expect_agreement=False, note=NOTE_REDUCE, **coh, **lg),
-        rolling_on_plane("rolling_epsd2_sjkr_pw", "epsd2", warpdem_cohesion="sjkr_liggghts", **coh, **lg),
-        rolling_on_plane("rolling_epsd2_sjkr_pw-reduce_on", "epsd2", tangential_reduce=True, **coh, **lg),
-        rolling_on_plane("rolling_epsd2_sjkr_pw-default", "epsd2", expect_agreement=False, note=NOTE_REDUCE,
-                         **coh, **lg),
+               warpdem_cohesion="sjkr_reduced", expect_agreement=False, note=NOTE_REDUCE, **coh, **lg),
+        rolling_on_plane("rolling_epsd2_sjkr_pw", "epsd2", **coh, **lg),
+        rolling_on_plane("rolling_epsd2_sjkr_pw-reduce_on", "epsd2", tangential_reduce=True,
+                         warpdem_cohesion="sjkr_reduced", **coh, **lg),
+        rolling_on_plane("rolling_epsd2_sjkr_pw-default", "epsd2", warpdem_cohesion="sjkr_reduced",
+                         expect_agreement=False, note=NOTE_REDUCE, **coh, **lg),
     ]
     return tuple(cases)
 

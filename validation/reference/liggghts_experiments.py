@@ -15,9 +15,10 @@ hand, so both codes run the same test:
 * **contact law**: ``hertz`` -> ``model hertz``; ``history`` -> ``tangential history``; rolling
   ``epsd2`` / ``cdt`` -> ``rolling_friction epsd2`` / ``cdt``; ``epsd`` -> ``rolling_friction
   epsd`` with ``coefficientRollingViscousDamping`` 0 (warpdem's epsd has no dashpot);
-  cohesion ``sjkr`` / ``sjkr2`` -> ``cohesion sjkr`` / ``sjkr2 ... tangential_reduce on`` (warpdem's
-  friction limits see the cohesion force; LIGGGHTS 3.8's default ``off`` does not, that is
-  warpdem's ``sjkr_liggghts``) (:data:`LAW_MAP`, :data:`TANGENTIAL_REDUCE`, :data:`APPROXIMATE`).
+  cohesion ``sjkr`` / ``sjkr2`` -> ``cohesion sjkr`` / ``sjkr2 ... tangential_reduce off`` (LIGGGHTS
+  3.8's default: the friction limits do not see the cohesion force); ``sjkr_reduced`` /
+  ``sjkr2_reduced`` -> ``... tangential_reduce on`` (:data:`LAW_MAP`, :data:`TANGENTIAL_REDUCE`,
+  :data:`APPROXIMATE`).
 * **fill**: ``identical`` writes the fill warpdem starts from (:meth:`Experiment.make_fill` with
   the run's seed; ``read_data``); ``poured`` lets LIGGGHTS insert the same mass of the same size
   distribution (diameters uniform by number as :func:`calibration.materials.sample_particles`
@@ -63,17 +64,17 @@ PARTICLE_TYPE, WALL_TYPE = 1, 2
 
 #: warpdem sub-model -> LIGGGHTS keyword per kind (None: no keyword, the sub-model is off).
 #: ``hertz``/``hertz_liggghts`` differ only in the wall contact point (r - delta vs LIGGGHTS'
-#: r - delta/2, :data:`APPROXIMATE`); ``sjkr``/``sjkr2`` let the friction limits see the cohesion,
-#: which LIGGGHTS does with ``tangential_reduce on`` (:data:`TANGENTIAL_REDUCE`).
+#: r - delta/2, :data:`APPROXIMATE`); ``sjkr_reduced``/``sjkr2_reduced`` let the friction limits see
+#: the cohesion, which LIGGGHTS does with ``tangential_reduce on`` (:data:`TANGENTIAL_REDUCE`).
 LAW_MAP: dict[str, dict[str, str | None]] = {
     "normal": {"hertz": "hertz", "hertz_liggghts": "hertz"},
     "tangential": {"history": "history"},
     "rolling": {"none": None, "epsd2": "epsd2", "cdt": "cdt", "cdt_liggghts": "cdt", "epsd": "epsd"},
-    "cohesion": {"none": None, "sjkr": "sjkr", "sjkr2": "sjkr2", "sjkr_liggghts": "sjkr", "sjkr2_liggghts": "sjkr2"},
+    "cohesion": {"none": None, "sjkr": "sjkr", "sjkr2": "sjkr2", "sjkr_reduced": "sjkr", "sjkr2_reduced": "sjkr2"},
 }
 #: cohesion sub-model -> LIGGGHTS ``tangential_reduce`` (on: the Coulomb and rolling limits see
-#: F_n with the cohesion, as warpdem's sjkr/sjkr2; off, LIGGGHTS 3.8's default: without it)
-TANGENTIAL_REDUCE = {"sjkr": True, "sjkr2": True, "sjkr_liggghts": False, "sjkr2_liggghts": False}
+#: F_n with the cohesion, as warpdem's sjkr_reduced; off, LIGGGHTS 3.8's default and warpdem's sjkr: without it)
+TANGENTIAL_REDUCE = {"sjkr": False, "sjkr2": False, "sjkr_reduced": True, "sjkr2_reduced": True}
 #: sub-models whose LIGGGHTS keyword is a close, not an exact, counterpart -> what differs
 APPROXIMATE = {
     "hertz": "wall contact point: warpdem 'hertz' at r - delta from the sphere centre (rigid wall), LIGGGHTS at "
@@ -201,7 +202,7 @@ def liggghts_model_keywords(law: wd.ContactLaw, tangential_reduce: bool | None =
     """``model hertz tangential history [cohesion Y] [rolling_friction X] [tangential_reduce on|off]``
     for a warpdem law, as ``pair_style gran`` takes it (LIGGGHTS parses the keywords in this order
     only). ``tangential_reduce``: None: as the law's cohesion sub-model means it
-    (:data:`TANGENTIAL_REDUCE`); True/False: force it (False: LIGGGHTS' default with warpdem's ``sjkr``)."""
+    (:data:`TANGENTIAL_REDUCE`); True/False: force it (True with warpdem's ``sjkr``: LIGGGHTS' ``tangential_reduce on``)."""
     models, settings = _models_and_settings(law, tangential_reduce)
     return " ".join(w for w in (models, settings) if w)
 

@@ -34,15 +34,17 @@ Note that for particles this is twice the first-order expansion of the exact ``s
 agree to first order (2 pi r_i delta); a k calibrated with one model does not carry over to
 the other.
 
-Which normal force the friction limits see. ``sjkr``/``sjkr2`` add their force to the ``fn``
-that the tangential (Coulomb, mu |F_n|) and rolling (mu_r R* |F_n|) sub-models get, as LIGGGHTS
-does with the keyword ``tangential_reduce on``. LIGGGHTS 3.8's *default* is ``tangential_reduce
-off`` (src/cohesion_model_sjkr.h: ``if(tangentialReduce_) sidata.Fn += Fn_coh;``): its friction
-and rolling limits see the Hertz force plus damping alone, which in a resting cohesive contact is
-the load plus k A, so the same k gives more friction and rolling resistance there than here.
-``sjkr_liggghts``/``sjkr2_liggghts`` are the same forces with LIGGGHTS' default
-(``cohesion_in_friction_limit = False``; checked against LIGGGHTS 3.8 by
-``tests/test_liggghts_contact.py``, see ``docs/liggghts_reference.md``).
+Which normal force the friction limits see. LIGGGHTS 3.8 adds the cohesion force to the ``F_n``
+that the tangential (Coulomb, mu |F_n|) and rolling (mu_r R* |F_n|) sub-models get only with the
+keyword ``tangential_reduce on`` (src/cohesion_model_sjkr.h: ``if(tangentialReduce_) sidata.Fn +=
+Fn_coh;``); its default is ``off``: the friction and rolling limits see the Hertz force plus damping
+alone, which in a resting cohesive contact carries the load plus k A. ``sjkr``/``sjkr2`` follow that
+default (what a LIGGGHTS user means by ``cohesion sjkr``); ``sjkr_reduced``/``sjkr2_reduced`` are
+the same forces with ``tangential_reduce on`` (warpdem's ``sjkr`` before 2026-11-27). At k = 1e5
+J/m^3 the two differ by a factor 7 in the friction limit of an 18 mm gravel grain resting on a
+wall, and the baffle box's static angle by 5-7 deg (checked against the LIGGGHTS binary contact
+by contact and in whole experiments: ``docs/liggghts_reference.md``). LIGGGHTS 3.8 sets the wall's
+``area_ratio`` to 1 for every wall contact (src/fix_wall_gran_base.h), as here.
 
 Not built: a JKR model with a pull-off range (e.g. LAMMPS ``pair granular jkr``), in which
 a contact survives separation up to a negative overlap and its force depends on the loading
@@ -93,14 +95,16 @@ def sjkr2_contact_area(c: ContactInput):
 
 @register
 class SimplifiedJKR(SubModel):
-    """F_coh = -k A with the exact intersection area (LIGGGHTS ``cohesion sjkr``)."""
+    """F_coh = -k A with the exact intersection area (LIGGGHTS 3.8 ``cohesion sjkr``, its default
+    ``tangential_reduce off``: the friction and rolling limits see F_n without it)."""
 
     kind = "cohesion"
     name = "sjkr"
     default_candidate = True
+    cohesion_in_friction_limit = False
     parameters = (COHESION_ENERGY_DENSITY,)
-    reference = ("LIGGGHTS-PUBLIC src/cohesion_model_sjkr.h (simplified JKR, F = -k A, A = exact "
-                 "intersection area of the two spheres)")
+    reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr.h with its default tangential_reduce off (simplified "
+                 "JKR, F = -k A, A = exact intersection area; the tangential and rolling limits see F_n without it)")
 
     def make(self, column):
         c_k = column("cohesion_energy_density")
@@ -114,12 +118,15 @@ class SimplifiedJKR(SubModel):
 
 @register
 class SimplifiedJKR2(SubModel):
-    """F_coh = -k A with A = 2 pi (2 R*) delta (LIGGGHTS ``cohesion sjkr2``)."""
+    """F_coh = -k A with A = 2 pi (2 R*) delta (LIGGGHTS 3.8 ``cohesion sjkr2``, default
+    ``tangential_reduce off``)."""
 
     kind = "cohesion"
     name = "sjkr2"
+    cohesion_in_friction_limit = False
     parameters = (COHESION_ENERGY_DENSITY,)
-    reference = "LIGGGHTS-PUBLIC src/cohesion_model_sjkr2.h (F = -k A, A = 2 pi (2 R*) delta; wall 2 pi r_i delta)"
+    reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr2.h with its default tangential_reduce off (F = -k A, "
+                 "A = 2 pi (2 R*) delta; wall 2 pi r_i delta; the tangential and rolling limits see F_n without it)")
 
     def make(self, column):
         c_k = column("cohesion_energy_density")
@@ -132,22 +139,22 @@ class SimplifiedJKR2(SubModel):
 
 
 @register
-class SimplifiedJKRLiggghtsDefault(SimplifiedJKR):
-    """``sjkr`` with LIGGGHTS 3.8's default ``tangential_reduce off``: the friction and rolling
-    limits see F_n without the cohesion force."""
+class SimplifiedJKRReduced(SimplifiedJKR):
+    """``sjkr`` with LIGGGHTS' ``tangential_reduce on``: the friction and rolling limits see F_n
+    with the (attractive) cohesion force, i.e. about the load alone in a resting contact."""
 
-    name = "sjkr_liggghts"
+    name = "sjkr_reduced"
     default_candidate = False
-    cohesion_in_friction_limit = False
-    reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr.h with its default tangential_reduce off (F = -k A, "
-                 "A = exact intersection area; the tangential and rolling limits see F_n without it)")
+    cohesion_in_friction_limit = True
+    reference = ("LIGGGHTS-PUBLIC src/cohesion_model_sjkr.h with tangential_reduce on (F = -k A, A = exact "
+                 "intersection area; the tangential and rolling limits see F_n including it)")
 
 
 @register
-class SimplifiedJKR2LiggghtsDefault(SimplifiedJKR2):
-    """``sjkr2`` with LIGGGHTS 3.8's default ``tangential_reduce off``."""
+class SimplifiedJKR2Reduced(SimplifiedJKR2):
+    """``sjkr2`` with LIGGGHTS' ``tangential_reduce on``."""
 
-    name = "sjkr2_liggghts"
-    cohesion_in_friction_limit = False
-    reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr2.h with its default tangential_reduce off (F = -k A, "
-                 "A = 2 pi (2 R*) delta; the tangential and rolling limits see F_n without it)")
+    name = "sjkr2_reduced"
+    cohesion_in_friction_limit = True
+    reference = ("LIGGGHTS-PUBLIC src/cohesion_model_sjkr2.h with tangential_reduce on (F = -k A, A = 2 pi (2 R*) "
+                 "delta; the tangential and rolling limits see F_n including it)")

@@ -24,9 +24,9 @@ Two tangential sub-models share the Mindlin spring and differ in how sliding is 
         S_t |delta_t| > mu_s |F_n|  ->  F_t = mu_s |F_n| (-delta_t / |delta_t|),
                                          delta_t <- -F_t / S_t   (no damping while sliding)
         otherwise                   ->  F_t = -S_t delta_t + F_t^d
-    F_n includes the normal damping, as LIGGGHTS' ``sidata.Fn`` does, and the cohesion of
-    ``sjkr``/``sjkr2`` (LIGGGHTS ``tangential_reduce on``; not with ``sjkr_liggghts``, LIGGGHTS'
-    default: :mod:`warpdem.contact.cohesion`).
+    F_n includes the normal damping, as LIGGGHTS' ``sidata.Fn`` does; the cohesion force only
+    with ``sjkr_reduced``/``sjkr2_reduced`` (LIGGGHTS ``tangential_reduce on``), not with
+    ``sjkr``/``sjkr2`` (LIGGGHTS' default: :mod:`warpdem.contact.cohesion`).
 ``mindlin`` (before 2026-11-27 the default): the spring is turned into the tangent plane with
     its magnitude kept; the Coulomb cap applies to the whole tangential force (spring plus
     damping), and while sliding the spring is reset so that spring plus damping carry exactly

@@ -29,9 +29,9 @@
                                                           kt = St of normal_model_hertz.h)
               |M_r| <= mu_r R* |F_n|                        (``fabs(cdata.Fn)*reff*rmu``)
           R* = r_i r_j / (r_i + r_j) between particles and r_i at a wall (LIGGGHTS ``reff``
-          there). F_n includes damping, as LIGGGHTS' ``sidata.Fn`` does, and the cohesion of
-          ``sjkr``/``sjkr2`` (LIGGGHTS ``tangential_reduce on``; LIGGGHTS' default leaves it
-          out: ``sjkr_liggghts``, :mod:`warpdem.contact.cohesion`). At a wall LIGGGHTS turns
+          there). F_n includes damping, as LIGGGHTS' ``sidata.Fn`` does; cohesion only with
+          ``sjkr_reduced``/``sjkr2_reduced`` (LIGGGHTS ``tangential_reduce on``; LIGGGHTS' default
+          and warpdem's ``sjkr`` leave it out, :mod:`warpdem.contact.cohesion`). At a wall LIGGGHTS turns
           the spring by w (r - delta/2) / (r - delta) per step instead of w (its ``wr`` is
           scaled to the contact radius), a difference of O(delta / r).
           One difference: LIGGGHTS keeps the stored torque as is; here, as for ``epsd`` and
