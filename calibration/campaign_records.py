@@ -20,7 +20,7 @@ confirmation round or the validation in ``runs.jsonl``) carries
 
 Not part of the fingerprint: the device (CPU and GPU runs of one model are the same experiment up
 to round-off), the number of processes, and the composition of a batch (a batch's time step
-follows its stiffest fill: see the README's Known limits).
+follows its stiffest fill: see docs/known_limits.md).
 """
 from __future__ import annotations
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -17,10 +18,12 @@ import numpy as np
 
 from .reporting import Cell, Figure, Report, Section, Table, Verdict
 
-__all__ = ["write_campaign_report", "campaign_report"]
+__all__ = ["write_campaign_report", "campaign_report", "campaign_verdict", "campaign_basis", "CampaignBasis"]
 
-#: acceptable ranges spanning more than this share of the design box in every parameter
+#: acceptable ranges spanning more than this share of the design box in every parameter: a weak basis
 BOX_COVERAGE_WARNING = 0.80
+#: a surrogate whose held-out R² is below this predicts too little to base a verdict on (0: nothing)
+WEAK_SURROGATE_R2 = 0.5
 
 _FIGURES = (
     ("acceptable_set.png", "Parameter sets whose predicted angles lie within the tolerance (colour: largest "
@@ -60,10 +63,114 @@ def _box_coverage(results: Mapping[str, Any]) -> dict[str, float]:
     return out
 
 
+@dataclass(frozen=True)
+class CampaignBasis:
+    """What a campaign's verdict rests on, and why that basis is weak (if it is).
+
+    held_out_r2 : per response, the surrogate's R² on the held-out design samples (empty: none held out).
+    held_out_n : how many samples were held out.
+    validation : the validation experiment's name (None: no validation).
+    validation_error_deg, validation_error_pct : |DEM - measured| of the validation (None: failed or none).
+    validation_criterion_deg : the calibration's tolerance, which the validation is held to.
+    acceptable_share : per parameter, the share of the design box the acceptable set spans.
+    weak : one sentence per weakness (the verdict's caveats); short : the same, a few words each.
+    """
+
+    held_out_r2: dict[str, float]
+    held_out_n: int | None
+    validation: str | None
+    validation_error_deg: float | None
+    validation_error_pct: float | None
+    validation_criterion_deg: float | None
+    acceptable_share: dict[str, float]
+    weak: tuple[str, ...]
+    short: tuple[str, ...]
+
+    @property
+    def weak_surrogates(self) -> list[str]:
+        """Responses whose surrogate's held-out R² is below :data:`WEAK_SURROGATE_R2`."""
+        return [n for n, r2 in self.held_out_r2.items() if not r2 >= WEAK_SURROGATE_R2]
+
+    def sentence(self) -> str:
+        """The basis in one sentence, weak or not."""
+        parts = []
+        if self.held_out_r2:
+            r2 = ", ".join(f"{n} {v:.2f}" for n, v in self.held_out_r2.items())
+            parts.append(f"surrogates' held-out R² {r2} on {self.held_out_n} samples (weak below {WEAK_SURROGATE_R2:g})")
+        else:
+            parts.append("no held-out samples, so the surrogates' accuracy is unknown")
+        if self.validation is not None:
+            crit = ("" if self.validation_criterion_deg is None
+                    else f"; criterion {self.validation_criterion_deg:.2f} deg, the calibration's tolerance")
+            parts.append(f"validation on the {self.validation} failed" if self.validation_error_deg is None else
+                         f"validation on the {self.validation} {self.validation_error_deg:.2f} deg off "
+                         f"({_pct(self.validation_error_pct)}{crit})")
+        return "Basis of this verdict: " + "; ".join(parts) + "."
+
+
+def _pct(v: float | None) -> str:
+    return "–" if v is None else f"{v:.1f} %"
+
+
+def _joined(words: list[str] | tuple[str, ...]) -> str:
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
+
+
+def campaign_basis(results: Mapping[str, Any]) -> CampaignBasis:
+    """The surrogates' held-out R², the validation's error against the calibration's tolerance and
+    the acceptable set's share of the box, with a sentence for each that makes the basis weak:
+    a held-out R² below :data:`WEAK_SURROGATE_R2`, a validation beyond the tolerance (or failed),
+    an acceptable set spanning more than :data:`BOX_COVERAGE_WARNING` of the box in every parameter."""
+    conf = (results.get("confirmation") or {}).get("responses") or {}
+    held = (results.get("surrogate") or {}).get("held_out") or {}
+    r2s = np.atleast_1d(np.asarray(held.get("r2", []), dtype=float)) if held else np.array([])
+    held_r2 = {n: float(v) for n, v in zip(conf, r2s)}
+    weak, short = [], []
+    for name, v in held_r2.items():
+        if v < 0:
+            weak.append(f"The surrogate for {name} predicts nothing: its held-out R² is {v:.2f}, worse than always "
+                        "answering the mean. Its optimum is a guess; run more samples or a larger scale before "
+                        "trusting the parameters.")
+            short.append(f"the surrogate for {name} predicts nothing (held-out R² {v:.2f})")
+        elif not v >= WEAK_SURROGATE_R2:
+            weak.append(f"The surrogate for {name} predicts poorly: its held-out R² is {v:.2f} (below "
+                        f"{WEAK_SURROGATE_R2:g}), so the optimum and the sensitivity drawn from it are rough; run more "
+                        "samples or a larger scale.")
+            short.append(f"the surrogate for {name} predicts poorly (held-out R² {v:.2f})")
+    tol = [t for t in _tolerances(results).values() if t is not None]
+    criterion = max(tol) if tol else None
+    val = results.get("validation")
+    v_name = v_err = v_pct = None
+    if val:
+        v_name = str(val.get("name") or val.get("experiment") or "validation experiment")
+        dem, measured = _num(val.get("dem_deg")), _num(val.get("measured_deg"))
+        v_err = None if dem is None or measured is None else abs(dem - measured)
+        v_pct = _num(val.get("relative_error_pct"))
+        if v_err is None:
+            weak.append(f"The validation on the {v_name} gave no angle, so the calibrated parameters are not validated.")
+            short.append(f"the validation on the {v_name} failed")
+        elif criterion is not None and v_err > criterion:
+            weak.append(f"The validation on the {v_name} is {v_err:.2f} deg ({_pct(v_pct)}) off, beyond the calibration's "
+                        f"tolerance of {criterion:.2f} deg: the calibrated parameters do not carry over to an "
+                        "experiment they were not calibrated on.")
+            short.append(f"the validation on the {v_name} is {_pct(v_pct)} off ({v_err:.2f} deg; criterion "
+                         f"{criterion:.2f} deg)")
+    cover = _box_coverage(results)
+    if cover and all(v > BOX_COVERAGE_WARNING for v in cover.values()):
+        weak.append(f"The acceptable set covers more than {BOX_COVERAGE_WARNING:.0%} of the design box in every parameter "
+                    f"({', '.join(f'{n} {v:.0%}' for n, v in cover.items())}): the data do not pin the "
+                    "parameters down. Many parameter sets reproduce the targets equally well; add an "
+                    "experiment that responds differently to them.")
+        short.append("the acceptable set spans most of the box")
+    return CampaignBasis(held_r2, held.get("n") if held else None, v_name, v_err, v_pct, criterion, cover,
+                         tuple(weak), tuple(short))
+
+
 def campaign_verdict(results: Mapping[str, Any]) -> tuple[Verdict, list[list]]:
-    """The verdict of a campaign (met when every confirmation run is within its tolerance; with the
-    warnings a reader needs: surrogates that predict nothing, an acceptable set spanning the box,
-    failed runs) and the confirmation table's rows. Shared by the HTML report and ``summary.md``."""
+    """The verdict of a campaign and the confirmation table's rows. Met when every confirmation
+    run is within its tolerance; it states its own basis (:func:`campaign_basis`: held-out R²,
+    validation error) and is amber, "met on a weak basis", when that basis is weak; failed design
+    runs are named. Shared by the HTML report, ``summary.md`` and the command line."""
     conf = (results.get("confirmation") or {}).get("responses") or {}
     if not conf:
         raise ValueError("campaign report: results hold no confirmation runs ('confirmation' -> 'responses')")
@@ -80,39 +187,39 @@ def campaign_verdict(results: Mapping[str, Any]) -> tuple[Verdict, list[list]]:
                      Cell(err, tone), t, Cell("—" if within is None else ("yes" if within else "no"), tone)])
         numbers.append((f"{name}: DEM error (tolerance)",
                         f"{'failed' if err is None else f'{err:.2f}'} deg ({'–' if t is None else f'{t:.2f}'} deg)"))
+    basis = campaign_basis(results)
+    if basis.held_out_r2:
+        numbers.append(("surrogate held-out R² (lowest)",
+                        "{1:.2f} ({0})".format(*min(basis.held_out_r2.items(), key=lambda kv: kv[1]))))
+    if basis.validation is not None:
+        numbers.append((f"validation {basis.validation}: error (criterion)",
+                        "failed" if basis.validation_error_deg is None else
+                        f"{basis.validation_error_deg:.2f} deg, {_pct(basis.validation_error_pct)} "
+                        f"({'–' if basis.validation_criterion_deg is None else f'{basis.validation_criterion_deg:.2f}'} deg)"))
     met = not misses
-    headline = (f"Calibration met: every confirmation run is within the tolerance of its target"
-                if met else f"Calibration not met: {', '.join(misses)} outside the tolerance (or failed)")
-    details, warnings = [], []
-    held = (results.get("surrogate") or {}).get("held_out")
-    if held:
-        r2 = np.atleast_1d(np.asarray(held.get("r2"), dtype=float))
-        for name, v in zip(conf, r2):
-            if v < 0:
-                warnings.append(f"The surrogate for {name} predicts nothing: its held-out R² is {v:.2f}, worse than "
-                                "always answering the mean. Its optimum is a guess; run more samples or a "
-                                "larger scale before trusting the parameters.")
-    cover = _box_coverage(results)
-    if cover and all(v > BOX_COVERAGE_WARNING for v in cover.values()):
-        warnings.append("The acceptable set covers more than 80 % of the design box in every parameter "
-                        f"({', '.join(f'{n} {v:.0%}' for n, v in cover.items())}): the data do not pin the "
-                        "parameters down. Many parameter sets reproduce the targets equally well; add an "
-                        "experiment that responds differently to them.")
+    if not met:
+        headline = f"Calibration not met: {', '.join(misses)} outside the tolerance (or failed)"
+    elif basis.weak:
+        headline = ("Calibration met on a weak basis: every confirmation run is within the tolerance of its target, "
+                    f"but {_joined(basis.short)}")
+    else:
+        headline = "Calibration met: every confirmation run is within the tolerance of its target"
+    details = list(basis.weak) + [basis.sentence()]
     failed = (results.get("design") or {}).get("failed") or []
     if failed:
-        warnings.append(f"{len(failed)} design run(s) failed and were left out of the surrogate.")
-    details += warnings
-    return Verdict(met, headline, details, numbers), rows
+        details.append(f"{len(failed)} design run(s) failed and were left out of the surrogate.")
+    return Verdict(met, headline, details, numbers, caveats=basis.weak), rows
 
 
 def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Report:
     """The :class:`~calibration.reporting.Report` of a campaign; figures are read from ``folder``."""
     folder = Path(folder)
     verdict, rows = campaign_verdict(results)
+    basis = campaign_basis(results)
     conf = results["confirmation"]["responses"]
     held = (results.get("surrogate") or {}).get("held_out")
-    cover = _box_coverage(results)
-    met, warnings = verdict.met, verdict.details
+    cover = basis.acceptable_share
+    met, warnings = verdict.met, list(verdict.caveats) + list((results.get("design") or {}).get("failed") or [])
 
     model = results.get("model") or {}
     material = model.get("material")
@@ -137,11 +244,15 @@ def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Re
             caption=f"On {held.get('n', '?')} held-out samples; 1 is perfect, 0 or less predicts nothing.")]))
     if "validation" in results:
         v = results["validation"]
+        err, crit = basis.validation_error_deg, basis.validation_criterion_deg
+        tone = "" if err is None or crit is None else ("good" if err <= crit else "bad")
         sections.append(Section("Validation on another experiment", [Table(
-            ["experiment", "measured (deg)", "DEM (deg)", "relative error (%)"],
+            ["experiment", "measured (deg)", "DEM (deg)", "abs. error (deg)", "relative error (%)", "criterion (deg)"],
             [[f"{v.get('experiment')} ({v.get('scale')} scale)", _num(v.get("measured_deg")),
-              _num(v.get("dem_deg")), _num(v.get("relative_error_pct"))]])]))
-    figures = [Figure.from_path(folder / f, cap) for f, cap in _FIGURES if (folder / f).is_file()]
+              Cell("failed" if _num(v.get("dem_deg")) is None else _num(v.get("dem_deg")), "bad" if err is None else ""),
+              Cell(err, tone), Cell(_num(v.get("relative_error_pct")), tone), crit]],
+            caption="Criterion: the calibration's tolerance (the largest of the responses').")]))
+    figures = _figures(results, folder, basis)
     if figures:
         sections.append(Section("Figures", figures))
     if results.get("vtk_series"):
@@ -170,6 +281,37 @@ def campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Re
     return Report(f"Calibration: {results.get('name', 'campaign')}", verdict, sections, nxt,
                   subtitle=f"Device {results.get('device', '?')}; total wall time {results.get('wall_s', '?')} s. "
                            "Angles in degrees.")
+
+
+def sensitivity_warning(basis: CampaignBasis) -> str | None:
+    """The warning the sensitivity plot carries when it is drawn from weak surrogates (None: not weak)."""
+    weak = basis.weak_surrogates
+    if not weak:
+        return None
+    r2 = ", ".join(f"{n} {basis.held_out_r2[n]:.2f}" for n in weak)
+    return (f"drawn from surrogates that predict poorly (held-out R² {r2}; weak below {WEAK_SURROGATE_R2:g}): "
+            "these shares describe the surrogates, not the DEM.")
+
+
+def _figures(results: Mapping[str, Any], folder: Path, basis: CampaignBasis) -> list[Figure]:
+    """The campaign's figures from ``folder``; the sensitivity plot is redrawn with a warning on it
+    (and saved over ``sensitivity.png``) when the surrogates it comes from are weak."""
+    warning = sensitivity_warning(basis)
+    sens = results.get("sensitivity") or {}
+    if warning and {"first_order", "total_order", "parameters", "responses"} <= set(sens):
+        from .sensitivity import SobolResult, plot_sensitivity
+
+        sob = SobolResult(list(sens["parameters"]), list(sens["responses"]), np.asarray(sens["first_order"], float),
+                          np.asarray(sens["total_order"], float), int(sens.get("n") or 0), 0)
+        folder.mkdir(parents=True, exist_ok=True)
+        plot_sensitivity(sob, path=str(folder / "sensitivity.png"), warning=warning)
+    figures = []
+    for name, caption in _FIGURES:
+        if (folder / name).is_file():
+            if warning and name == "sensitivity.png":
+                caption = f"Warning: {warning} " + caption
+            figures.append(Figure.from_path(folder / name, caption))
+    return figures
 
 
 def write_campaign_report(results: Mapping[str, Any], folder: str | os.PathLike) -> Path:

@@ -139,18 +139,46 @@ class Section:
 @dataclass(frozen=True)
 class Verdict:
     """The answer the reader came for: ``met`` True / False / None (no target), a headline,
-    optional detail sentences and ``numbers`` as (label, value text) pairs."""
+    optional detail sentences and ``numbers`` as (label, value text) pairs.
+
+    ``caveats`` are the reasons the basis of the answer is weak (a surrogate that predicts poorly,
+    a validation beyond its criterion, data that cannot tell): a verdict with caveats is never
+    green, it turns amber unless it is already red, and they are listed first, marked, under the
+    headline (a detail equal to a caveat is not listed twice). ``status`` replaces the label above
+    the headline ("Met", "Not met", "Met on a weak basis", ...)."""
 
     met: bool | None
     headline: str
     details: Sequence[str] = ()
     numbers: Sequence[tuple[str, Any]] = ()
+    caveats: Sequence[str] = ()
+    status: str = ""
 
     def __post_init__(self) -> None:
         if self.met not in (True, False, None):
             raise ValueError(f"Verdict.met must be True, False or None, got {self.met!r}")
         if not str(self.headline).strip():
             raise ValueError("Verdict headline must not be empty")
+        if isinstance(self.caveats, str):
+            raise TypeError("Verdict.caveats must be a sequence of sentences, not one string")
+
+    @property
+    def tone(self) -> str:
+        """``"met"`` (green), ``"weak"`` (amber: met or no target, with caveats), ``"notmet"`` (red) or
+        ``""`` (neutral: no target, no caveats)."""
+        if self.met is False:
+            return "notmet"
+        if self.caveats:
+            return "weak"
+        return "met" if self.met else ""
+
+    @property
+    def status_text(self) -> str:
+        """The label above the headline."""
+        if self.status:
+            return self.status
+        return {"met": "Met", "notmet": "Not met", "weak": "Met on a weak basis" if self.met else "Weak basis",
+                "": "Result"}[self.tone]
 
 
 _CSS = """
@@ -167,7 +195,10 @@ h2 { font-size: 19px; margin: 34px 0 10px; padding-bottom: 4px; border-bottom: 2
 .verdict.met { border-color: var(--good); background: var(--good-bg); }
 .verdict.notmet { border-color: var(--bad); background: var(--bad-bg); }
 .verdict .status { font-weight: 700; letter-spacing: .04em; text-transform: uppercase; font-size: 13px; }
+.verdict.weak { border-color: var(--warn); background: var(--warn-bg); }
 .verdict.met .status { color: var(--good); } .verdict.notmet .status { color: var(--bad); }
+.verdict.weak .status { color: var(--warn); }
+.verdict li.caveat::marker { color: var(--warn); } .verdict .caveat-label { font-weight: 600; color: var(--warn); }
 .verdict .headline { font-size: 20px; font-weight: 600; margin: 4px 0 8px; }
 .verdict ul { margin: 6px 0 8px 18px; padding: 0; }
 .numbers { display: flex; flex-wrap: wrap; gap: 10px; margin-top: 10px; }
@@ -225,11 +256,13 @@ class Report:
     # ------------------------------------------------------------------ rendering
     def _verdict_html(self) -> str:
         v = self.verdict
-        cls, status = {True: ("met", "Met"), False: ("notmet", "Not met"), None: ("", "Result")}[v.met]
-        out = [f'<section class="verdict {cls}" id="verdict">', f'<div class="status">{status}</div>',
+        out = [f'<section class="verdict {v.tone}" id="verdict">', f'<div class="status">{_esc(v.status_text)}</div>',
                f'<div class="headline">{_esc(v.headline)}</div>']
-        if v.details:
-            out.append("<ul>" + "".join(f"<li>{_esc(d)}</li>" for d in v.details) + "</ul>")
+        caveats = list(dict.fromkeys(v.caveats))
+        items = [f'<li class="caveat"><span class="caveat-label">Weak basis:</span> {_esc(c)}</li>' for c in caveats]
+        items += [f"<li>{_esc(d)}</li>" for d in v.details if d not in caveats]
+        if items:
+            out.append("<ul>" + "".join(items) + "</ul>")
         if v.numbers:
             out.append('<div class="numbers">')
             for label, value in v.numbers:

@@ -181,11 +181,12 @@ def sobol_indices(
 
 
 def plot_sensitivity(result: SobolResult, path: str | None = None, kind: str = "total",
-                     reference: dict[tuple[str, str], float] | None = None):
+                     reference: dict[tuple[str, str], float] | None = None, warning: str | None = None):
     """Grouped bars of percent contribution per response (paper Figure 13 style).
 
     ``reference`` maps ``(response, parameter) -> percent`` to overlay published values.
-    Saves to ``path`` if given; returns the Figure.
+    ``warning``: a sentence printed in an amber box above the panels (e.g. the indices come from
+    surrogates that predict poorly). Saves to ``path`` if given; returns the Figure.
     """
     import matplotlib
 
@@ -221,6 +222,12 @@ def plot_sensitivity(result: SobolResult, path: str | None = None, kind: str = "
                 labels.append(lab)
     seen = dict(zip(labels, handles))  # one entry per name
     fig.legend(seen.values(), seen.keys(), loc="outside lower center", ncols=min(3, len(seen)), fontsize=8)
+    if warning:
+        import textwrap
+
+        fig.suptitle("\n".join(textwrap.wrap(f"Warning: {warning}", width=int(11 * 4.2 * m))), fontsize=9,
+                     color="#9a6700", fontweight="bold",
+                     bbox=dict(boxstyle="round,pad=0.4", facecolor="#fff4d6", edgecolor="#9a6700"))
     if path is not None:
         fig.savefig(path, dpi=120)
         plt.close(fig)

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-COMMANDS = ["experiment", "measure", "calibrate", "diagnose", "pump", "pour", "bench"]
+COMMANDS = ["experiment", "measure", "calibrate", "diagnose", "pump", "pour", "bench", "doctor"]
 
 
 @pytest.fixture(scope="module")

@@ -70,3 +70,16 @@ def test_scale_and_window_in_mm(pile, capsys):
     # 2 px/mm, origin bottom-left: the same window as above in mm
     rc, out, _ = run(capsys, pile, "--scale", "2", "--window", "180", "270", "10", "100")
     assert rc == 0 and abs(out["angle_deg"] - ANGLE) < 1.0 and not math.isnan(out["angle_deg"])
+
+
+def test_the_readme_photo_measures_its_known_slope(capsys, tmp_path, monkeypatch):
+    """README: `warpdem measure examples/data/pile_photo.png --scale 2 --window 60 290 5 190 ...` on the
+    shipped photo (examples/make_pile_photo.py: a 33 deg slope) gives 33 deg."""
+    from pathlib import Path
+
+    photo = Path(__file__).resolve().parents[1] / "examples" / "data" / "pile_photo.png"
+    assert photo.is_file() and photo.stat().st_size < 200_000
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = run(capsys, str(photo), "--scale", "2", "--window", "60", "290", "5", "190")
+    assert rc == 0, err
+    assert abs(out["angle_deg"] - 33.0) < 1.0

@@ -69,7 +69,7 @@ def test_every_sphere_hits_once(base):
 
 
 # tolerance per metric for dt -> dt / 2 (50 -> 100 steps per contact): impulses are exact to
-# O(dt / t_c)^2; the energies sum F v dt with the step's start velocity, +O(dt / t_c) (README)
+# O(dt / t_c)^2; the energies sum F v dt with the step's start velocity, +O(dt / t_c) (pump/README.md)
 DT_TOLERANCE = {"force_n": 0.005, "pressure_n": 0.005, "force_t": 0.02, "pressure_t": 0.02,
                 "energy_n_per_area": 0.03, "power_n_per_area": 0.03, "energy_t_per_area": 0.03,
                 "power_t_per_area": 0.03, "impact_rate_per_area": 1e-9}

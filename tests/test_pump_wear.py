@@ -72,7 +72,7 @@ def test_sliding_tangential_energy_is_mu_fn_distance():
 def test_impact_normal_energy_is_the_work_of_the_normal_force():
     """No gravity, no rotation: F_n = m dv/dt, so E_n = sum |F_n v_n| dt = sum |m dv v|; its
     compression part is the kinetic energy 1/2 m v0^2, its restitution part the rebound energy
-    1/2 m v1^2 plus twice the work of the attractive tail of the damped force (README limits).
+    1/2 m v1^2 plus twice the work of the attractive tail of the damped force (docs/known_limits.md).
     The accumulator takes v_n at the start of the step, which overestimates the work by
     O(dt / t_c): 2 % with 27 steps per contact, 0.4 % with the 140 used here."""
     v0 = 1.0

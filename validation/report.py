@@ -83,17 +83,29 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
 
 def _verdict(result: "DiagnosisResult") -> Verdict:
     """The headline, its first detail and the key numbers: largest |z| and chi^2 per observable
-    of the base and final versions, observables within 2 sigma, DEM runs, wall time."""
+    of the base and final versions, observables within 2 sigma, and what the verdict rests on (the
+    base model's plausible share of the box when it is adequate, the final version's lowest surrogate
+    CV R²), DEM runs, wall time. Amber, "cannot tell", with the reason when ``result.caveats`` says
+    the data cannot tell (:func:`validation.diagnose.data_cannot_tell`)."""
     first, last = result.history.versions[0], result.history.versions[-1]
     numbers = [("base model: largest |z| (DEM)", first.max_abs_z),
                ("base model: χ² per observable", first.chi2_per_observable)]
     if len(result.versions) > 1:
         numbers += [(f"{result.final.name}: largest |z|", last.max_abs_z),
                     (f"{result.final.name}: χ² per observable", last.chi2_per_observable)]
-    numbers += [("observables within 2σ (final)", f"{last.n_within} of {last.n_observables}"),
-                ("DEM runs (set × fill, each in every experiment)", result.forward["runs"]),
+    numbers.append(("observables within 2σ (final)", f"{last.n_within} of {last.n_observables}"))
+    if result.base.adequacy.adequate:
+        numbers.append(("plausible share of the box (base)", f"{result.base.adequacy.plausible_fraction:.0%}"))
+    cv = [(q.r2, q.key) for q in result.final.surrogates.quality if q.r2 is not None and np.isfinite(q.r2)]
+    if cv:
+        r2, key = min(cv)
+        numbers.append((f"lowest surrogate CV R² ({result.final.name})",
+                        f"{r2:.2f} ({result.observations[result.observations.index(key)].name})"))
+    numbers += [("DEM runs (set × fill, each in every experiment)", result.forward["runs"]),
                 ("wall time (s)", round(result.seconds["total"], 1))]
-    return Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers)
+    caveats = list(result.caveats)
+    return Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers,
+                   caveats=caveats, status="Cannot tell" if caveats else "")
 
 
 def _comparison_section(result: "DiagnosisResult", figure_paths: Mapping[str, os.PathLike]) -> Section:
@@ -143,6 +155,7 @@ def _adequacy_sections(result: "DiagnosisResult", figure_paths: Mapping[str, os.
     if a.adequate:
         sp = base.version.space
         sections.append(Section("Plausible set (the ambiguity the data leave)", [
+            *result.caveats,
             Table(["parameter", "unit", "box", "plausible range", "best fit"],
                   [[n, u, f"{lo:.3g} – {hi:.3g}", f"{a.plausible_ranges[n][0]:.3g} – {a.plausible_ranges[n][1]:.3g}",
                     base.best_parameters[n]] for n, u, lo, hi in zip(sp.names, sp.units, sp.lower, sp.upper)]),

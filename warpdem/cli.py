@@ -3,7 +3,7 @@
 The engine does not know the applications built on it: subcommands are discovered through the
 entry-point group ``warpdem.commands`` (``name = "package.module:function"``, the function takes
 the remaining arguments and returns an exit code). This package declares its own
-(experiment, measure, calibrate, diagnose, pump, pour, bench) in ``pyproject.toml``; another
+(experiment, measure, calibrate, diagnose, pump, pour, bench, doctor) in ``pyproject.toml``; another
 installed package can add one the same way.
 """
 from __future__ import annotations
@@ -27,6 +27,7 @@ HELP = {
     "pump": "slurry-pump wear prototype (particles, simplified flow, wear per triangle)",
     "pour": "pour a box and lift its baffle (VTK out): a first look at the engine",
     "bench": "settled-bed engine benchmark (one JSON line)",
+    "doctor": "versions, devices (CUDA or not), packages, LIGGGHTS, where results go",
 }
 
 

@@ -1,7 +1,7 @@
 """Warp kernels of the engine: sphere placement, body integration, wall motion, neighbour lists;
 the geometry and contact helpers the contact stages (:mod:`warpdem.stages`) share.
 
-All kernels run unchanged on ``cpu`` and ``cuda``. Layout (see ``design`` notes in README):
+All kernels run unchanged on ``cpu`` and ``cuda``. Layout (see docs/engine.md, "Design in one screen"):
 structure of arrays, body-major (the member spheres of a body are contiguous), one thread
 per sphere for contacts (full neighbour list: each pair is evaluated from both sides, so no
 atomics are needed for particle forces and results are deterministic), one thread per body
