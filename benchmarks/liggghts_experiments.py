@@ -73,7 +73,9 @@ def make_experiment(name: str, scale: str, law: str, fill_index: int, overrides:
 def _quiet() -> None:
     import warp as wp
 
-    wp.config.quiet = True
+    from warpdem.warp_output import quiet_warp
+
+    quiet_warp()
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 

@@ -205,7 +205,9 @@ def build_case(cfg: dict) -> PumpCase:
     from .wear import ImpactRecorder, WearRecorder
 
     t0 = _time.perf_counter()
-    wp.config.quiet = True
+    from warpdem.warp_output import quiet_warp
+
+    quiet_warp()
     wp.init()
     design = PumpDesign.from_config(cfg["design"])
     gcfg = cfg["geometry"]

@@ -1,6 +1,6 @@
 import os
 
-import warp as wp
+from warpdem.warp_output import quiet_warp
 
-wp.config.quiet = True
+quiet_warp()
 os.environ.setdefault("MPLBACKEND", "Agg")

@@ -66,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"warpdem {version()}")
         return 0
     cmd, rest = argv[0], argv[1:]
+    from .warp_output import quiet_warp
+
+    quiet_warp()  # Warp's banner and module-load lines off (WARPDEM_WARP_VERBOSE=1 keeps them)
     if cmd not in found:
         print(f"warpdem: unknown command '{cmd}'; commands: {', '.join(sorted(found)) or 'none registered'}",
               file=sys.stderr)

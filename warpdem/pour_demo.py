@@ -46,7 +46,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--mu-r", type=float, default=0.1, help="rolling friction (EPSD)")
     args = ap.parse_args(argv)
     check_output_folder(args.out, "--out")
-    wp.config.quiet = True
+    from warpdem.warp_output import quiet_warp
+
+    quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     d, rng = 0.018, np.random.default_rng(1)
     box_x, box_y = 0.30, 0.20

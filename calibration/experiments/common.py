@@ -776,8 +776,8 @@ def _run_chunk_on_ray(exp: Experiment, parameter_sets: list, device: str | None,
 def _run_chunk(exp: Experiment, parameter_sets: list, device: str | None, first_world: int,
                checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
     """Worker of :meth:`Experiment._run_in_processes`: worlds ``first_world ...`` of a run."""
-    import warp as wp
+    from warpdem.warp_output import quiet_warp
 
-    wp.config.quiet = True
+    quiet_warp()
     part = dataclasses.replace(exp, first_fill_index=exp.first_fill_index + first_world)
     return part.run(parameter_sets, device=device, progress=False, processes=1, checkpoints=checkpoints)
