@@ -75,9 +75,11 @@ def scene_clumps() -> wd.Simulation:
 
 
 def scene_cohesion_epsd2() -> wd.Simulation:
-    """Cohesive spheres (sjkr) with epsd2 rolling resistance heaped on a tilted plate."""
+    """Cohesive spheres with epsd2 rolling resistance heaped on a tilted plate. The reference was
+    recorded when ``sjkr`` let the friction limits see the cohesion; that law is ``sjkr_reduced``
+    since 2026-11-27 (``sjkr`` now follows LIGGGHTS' default, warpdem.contact.cohesion)."""
     rng = np.random.default_rng(3)
-    b = wd.ModelBuilder(contact_law=wd.ContactLaw(rolling="epsd2", cohesion="sjkr", tangential=REFERENCE_TANGENTIAL))
+    b = wd.ModelBuilder(contact_law=wd.ContactLaw(rolling="epsd2", cohesion="sjkr_reduced", tangential=REFERENCE_TANGENTIAL))
     b.add_material(wd.GRAVEL)
     pos = _lattice(27, 1.98 * R, (-0.0125, -0.0125, 0.0068), rng, 5e-5)
     b.add_spheres(pos, R * rng.uniform(0.9, 1.1, 27), "gravel", velocities=rng.normal(0.0, 0.1, (27, 3)) + (0.0, 0.0, -0.3),
