@@ -328,6 +328,15 @@ def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>")
             # DEM targets at known parameters: names and values checked now, not after the design ran
             for k, v in t["dem_at"].items():
                 model.check_value(k, v, f"{source}: response '{resp.name}' target dem_at")
+            missing = [p.name for p in plist if p.name not in t["dem_at"] and p.name not in cfg.fixed]
+            if missing:
+                raise ConfigError(f"{source}: response '{resp.name}' target dem_at: no value for the calibrated "
+                                  f"parameter(s) {missing}; a DEM target needs every one of {[p.name for p in plist]}")
+    tol = cfg.optimisation.get("tolerance_deg")
+    if isinstance(tol, (list, tuple)) and len(tol) != len(cfg.responses):
+        raise ConfigError(f"{source}: optimisation.tolerance_deg has {len(tol)} value(s) for {len(cfg.responses)} "
+                          f"response(s) {[r.name for r in cfg.responses]}: give one per response, in their order, "
+                          f"or a single number")
     if not 0 <= cfg.held_out < cfg.samples - len(plist):
         raise ConfigError(f"{source}: design.held_out ({cfg.held_out}) must leave more training samples than "
                           f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
