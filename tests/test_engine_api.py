@@ -269,3 +269,22 @@ def test_kinetic_energy_is_summed_per_world_in_body_order():
     assert got.dtype == np.float64 and want.sum() > 0
     np.testing.assert_allclose(got, want, rtol=1e-5)
     assert np.array_equal(sim.kinetic_energy(), got)
+
+
+def test_a_state_of_another_model_is_refused_even_where_sizes_agree():
+    """``State.to_numpy`` carries its model's fingerprint; ``load_numpy`` refuses another model's
+    arrays (issue 29: it loaded silently when the counts matched)."""
+    def model(gravity_z):
+        b = wd.ModelBuilder()
+        b.add_material(wd.GRAVEL)
+        b.add_sphere((0.0, 0.0, 0.05), 0.009, "gravel")
+        b.add_sphere((0.03, 0.0, 0.05), 0.009, "gravel")
+        b.gravity = (0.0, 0.0, gravity_z)
+        return b.finalize("cpu")
+
+    a, other = model(-9.81), model(-1.62)
+    assert a.fingerprint != other.fingerprint
+    data = wd.State(a).to_numpy()
+    wd.State(a).load_numpy(data)  # its own model: loads
+    with pytest.raises(wd.ConfigError, match="saved from model"):
+        wd.State(other).load_numpy(data)

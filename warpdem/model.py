@@ -274,13 +274,18 @@ class State:
               "contact_partner", "contact_spring", "contact_roll", "contact_wnormal", "time")
 
     def to_numpy(self) -> dict[str, np.ndarray]:
-        return {name: getattr(self, name).numpy() for name in self.ARRAYS}
+        """Every array of the State, and ``model_fingerprint`` (the model it belongs to)."""
+        data = {name: getattr(self, name).numpy() for name in self.ARRAYS}
+        data["model_fingerprint"] = np.array(self.model_fingerprint)
+        return data
 
     def load_numpy(self, data: dict[str, np.ndarray], fingerprint: str | None = None) -> None:
-        """Load arrays saved by :meth:`to_numpy`; ``fingerprint``: the model they came from
-        (refused with a ConfigError if it is not this State's model)."""
-        if fingerprint is not None and fingerprint != self.model_fingerprint:
-            raise ConfigError(f"state was saved from model {fingerprint}, not from this model {self.model_fingerprint}")
+        """Load arrays saved by :meth:`to_numpy`. The model they came from (``fingerprint``, else the
+        ``model_fingerprint`` the arrays carry) must be this State's model: another model's state is
+        refused with a ConfigError, even where the array sizes happen to agree."""
+        for given in (fingerprint, str(data["model_fingerprint"]) if "model_fingerprint" in data else None):
+            if given is not None and given != self.model_fingerprint:
+                raise ConfigError(f"state was saved from model {given}, not from this model {self.model_fingerprint}")
         for name in self.ARRAYS:
             arr = getattr(self, name)
             src = np.asarray(data[name])
