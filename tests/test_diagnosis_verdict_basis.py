@@ -86,3 +86,30 @@ def test_a_narrowed_plausible_set_keeps_no_effect_is_needed_in_green():
     assert verdict.tone == "met" and verdict.status_text == "Met"
     assert dict(verdict.numbers)["plausible share of the box (base)"] == "30%"
     assert 'class="verdict met"' in Report("diagnosis", verdict).to_html()
+
+
+def candidate(name: str, log_bayes: float, r2: float) -> SimpleNamespace:
+    """The parts of a :class:`validation.ranking.CandidateResult` a weak choice reads."""
+    quality = [SimpleNamespace(key="cylinder/pile_angle", r2=0.9), SimpleNamespace(key="baffle/static_angle", r2=r2)]
+    return SimpleNamespace(name=name, log_bayes=log_bayes, effect=SimpleNamespace(words=name.replace("_", " ")),
+                           study=SimpleNamespace(surrogates=SimpleNamespace(quality=quality)))
+
+
+@pytest.mark.parametrize("margin, r2, weak", [(1.1, -1.07, True), (2.4, 0.3, True), (3.5, -1.07, False),
+                                              (1.1, 0.6, False)])
+def test_a_choice_on_a_thin_margin_from_poor_surrogates_is_weak(margin, r2, weak):
+    """The README's main job chose rolling resistance over cohesion by ln B 1.1 with a static-angle
+    surrogate of CV R^2 -1.07: that choice is a caveat (amber), while a strong margin or good
+    surrogates are not."""
+    from validation.diagnose import RankingRound, weak_choice
+
+    top, runner = candidate("rolling_resistance", 14.6, r2), candidate("cohesion", 14.6 - margin, r2)
+    rnd = RankingRound(current=None, candidates=(top, runner), tied=(), discrimination=None,
+                       chosen="rolling_resistance", reason="highest evidence")
+    why = weak_choice(rnd)
+    assert (why is not None) == weak
+    if weak:
+        assert "rolling resistance over cohesion" in why and f"{margin:.1f}" in why and f"{r2:.2f}" in why
+    # a tie settled by a proposed measurement, or no choice at all, is not a weak choice of the data
+    assert weak_choice(RankingRound(None, (top, runner), (), SimpleNamespace(), "rolling_resistance", "")) is None
+    assert weak_choice(RankingRound(None, (top, runner), (), None, None, "")) is None

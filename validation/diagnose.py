@@ -544,6 +544,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     met, headline, details, steps = _summarise(versions, rounds, history, settings)
     cannot_tell = data_cannot_tell(base.adequacy) if len(versions) == 1 else None
     caveats = [cannot_tell] if cannot_tell else []
+    caveats += [why for why in map(weak_choice, rounds) if why]
     return DiagnosisResult(obs, settings, versions, rounds, history, met, headline, details, steps,
                            {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands, caveats)
 
@@ -604,6 +605,38 @@ def data_cannot_tell(adequacy: Adequacy) -> str | None:
     return (f"The base model is plausible over {share:.0%} of its parameter box ({CANNOT_TELL_PLAUSIBLE_SHARE:.0%} or "
             "more: the data rule out almost nothing): these measurements scatter too much, or respond too little to "
             "the parameters, to show whether an effect is missing or to pin the parameters down.")
+
+
+#: a choice between candidate effects is called weak when its evidence margin is below this ln B
+#: ("strong" starts at 2 ln B = 6, Kass & Raftery 1995, J. Am. Stat. Assoc. 90:773) while a surrogate
+#: it rests on predicts poorly (cross-validated R^2 below WEAK_CHOICE_R2)
+WEAK_CHOICE_LOG_BAYES = 3.0
+WEAK_CHOICE_R2 = 0.5
+
+
+def weak_choice(rnd: RankingRound) -> str | None:
+    """Why a ranking round's choice is weak, or None: the chosen effect beat the runner-up by less than
+    :data:`WEAK_CHOICE_LOG_BAYES` while a surrogate of either study has a cross-validated R^2 below
+    :data:`WEAK_CHOICE_R2` (the Bayes factors come from those surrogates). A tie decided by a
+    proposed measurement, or an effect added by the user, is not a weak choice of the data."""
+    if rnd.chosen is None or len(rnd.candidates) < 2 or rnd.discrimination is not None:
+        return None
+    chosen = next((c for c in rnd.candidates if c.name == rnd.chosen), None)
+    if chosen is None or chosen is not rnd.candidates[0]:
+        return None  # added by the user's 'add', not by the ranking
+    runner = rnd.candidates[1]
+    margin = chosen.log_bayes - runner.log_bayes
+    quality = [(q.r2, q.key) for c in (chosen, runner) for q in c.study.surrogates.quality
+               if q.r2 is not None and np.isfinite(q.r2)]
+    if not quality or not margin < WEAK_CHOICE_LOG_BAYES:
+        return None
+    r2, key = min(quality)
+    if not r2 < WEAK_CHOICE_R2:
+        return None
+    return (f"The choice of {chosen.effect.words} over {runner.effect.words} rests on a margin of ln B {margin:.1f} "
+            f"(below {WEAK_CHOICE_LOG_BAYES:g}, short of 'strong' evidence) computed from surrogates whose "
+            f"cross-validated R² is as low as {r2:.2f} ({key}): these measurements may not tell the two effects "
+            f"apart; a measurement that separates them (proposals) or more design points would.")
 
 
 def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: ErrorHistory,
