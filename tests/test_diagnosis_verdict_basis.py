@@ -113,3 +113,15 @@ def test_a_choice_on_a_thin_margin_from_poor_surrogates_is_weak(margin, r2, weak
     # a tie settled by a proposed measurement, or no choice at all, is not a weak choice of the data
     assert weak_choice(RankingRound(None, (top, runner), (), SimpleNamespace(), "rolling_resistance", "")) is None
     assert weak_choice(RankingRound(None, (top, runner), (), None, None, "")) is None
+
+
+def test_an_effect_added_on_a_weak_choice_reads_met_on_a_weak_basis():
+    """Two versions (base + the added effect), all within 2 sigma, a weak-choice caveat: amber, "Met on
+    a weak basis" (not "Cannot tell", which is for data that cannot show whether an effect is missing)."""
+    r = result(0.3)
+    added = SimpleNamespace(**{**vars(r.base), "name": "base + rolling resistance"})
+    why = "The choice of rolling resistance over cohesion rests on a margin of ln B 1.1"
+    r = SimpleNamespace(**{**vars(r), "versions": [r.base, added], "final": added, "met": True, "caveats": [why]})
+    verdict = _verdict(r)
+    assert verdict.tone == "weak" and verdict.status_text == "Met on a weak basis" and verdict.caveats == [why]
+    assert ">Met on a weak basis<" in Report("diagnosis", verdict).to_html()

@@ -85,8 +85,10 @@ def _verdict(result: "DiagnosisResult") -> Verdict:
     """The headline, its first detail and the key numbers: largest |z| and chi^2 per observable
     of the base and final versions, observables within 2 sigma, and what the verdict rests on (the
     base model's plausible share of the box when it is adequate, the final version's lowest surrogate
-    CV R²), DEM runs, wall time. Amber, "cannot tell", with the reason when ``result.caveats`` says
-    the data cannot tell (:func:`validation.diagnose.data_cannot_tell`)."""
+    CV R²), DEM runs, wall time. Amber with the reasons when ``result.caveats`` holds any: "cannot
+    tell" when the data cannot tell whether an effect is missing
+    (:func:`validation.diagnose.data_cannot_tell`), "met on a weak basis" when an effect was added on a
+    weak choice (:func:`validation.diagnose.weak_choice`)."""
     first, last = result.history.versions[0], result.history.versions[-1]
     numbers = [("base model: largest |z| (DEM)", first.max_abs_z),
                ("base model: χ² per observable", first.chi2_per_observable)]
@@ -104,8 +106,12 @@ def _verdict(result: "DiagnosisResult") -> Verdict:
     numbers += [("DEM runs (set × fill, each in every experiment)", result.forward["runs"]),
                 ("wall time (s)", round(result.seconds["total"], 1))]
     caveats = list(result.caveats)
+    # "cannot tell" when the data cannot show whether an effect is missing (one version); an effect
+    # added on a weak choice is "met on a weak basis" (validation.diagnose.weak_choice)
+    status = ("Cannot tell" if len(result.versions) == 1 else
+              "Met on a weak basis" if result.met else "Not met, on a weak basis") if caveats else ""
     return Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers,
-                   caveats=caveats, status="Cannot tell" if caveats else "")
+                   caveats=caveats, status=status)
 
 
 def _comparison_section(result: "DiagnosisResult", figure_paths: Mapping[str, os.PathLike]) -> Section:
