@@ -639,6 +639,17 @@ def weak_choice(rnd: RankingRound) -> str | None:
             f"apart; a measurement that separates them (proposals) or more design points would.")
 
 
+def _single_fit_caveats(first, met: bool, within_sigma: float, unsettled: list[str], waves_words: str) -> str:
+    """What a base-only headline adds: observables beyond ``within_sigma`` at the single best fit, and
+    where the surrogate still disagrees with the DEM there."""
+    text = ""
+    if not met:
+        text += f"; {first.n_observables - first.n_within} lie beyond {within_sigma:g} sigma at the single best fit"
+    if unsettled:
+        text += f"; the surrogate still disagrees with the DEM there for {', '.join(unsettled)}{waves_words}"
+    return text
+
+
 def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: ErrorHistory,
                settings: DiagnosisSettings) -> tuple[bool, str, list[str], list[str]]:
     """Verdict headline, details and next steps in words."""
@@ -656,22 +667,14 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         headline = (f"The data cannot tell: the base model is plausible over {base.adequacy.plausible_fraction:.0%} "
                     f"of its parameter box, so these {first.n_observables} observables neither call for an effect nor "
                     f"pin its parameters down (DEM at the best fit: largest |z| {first.max_abs_z:.1f})")
-        if not met:
-            headline += f"; {first.n_observables - first.n_within} lie beyond {w:g} sigma at the single best fit"
-        if unsettled:
-            headline += (f"; the surrogate still disagrees with the DEM there for {', '.join(unsettled)}"
-                         f"{waves_words}")
+        headline += _single_fit_caveats(first, met, w, unsettled, waves_words)
         steps.append("Measure more before reading this as 'no effect is needed': more repeats, a larger scale "
                      "(less scatter between fills) or observables that respond to the parameters and the candidate "
                      "effects (drum speeds, the pile test, bulk density).")
     elif base.adequacy.adequate and len(versions) == 1:
         headline = (f"No effect is needed: the base model reproduces all {first.n_observables} observables "
                     f"(DEM at the best fit: largest |z| {first.max_abs_z:.1f})")
-        if not met:
-            headline += f"; {first.n_observables - first.n_within} lie beyond {w:g} sigma at the single best fit"
-        if unsettled:
-            headline += (f"; the surrogate still disagrees with the DEM there for {', '.join(unsettled)}"
-                         f"{waves_words}")
+        headline += _single_fit_caveats(first, met, w, unsettled, waves_words)
         steps.append("Use a parameter set from the plausible set; to narrow it, measure more observables "
                      "(drum speeds, the pile test, bulk density).")
     elif len(versions) == 1:
