@@ -93,10 +93,9 @@ LEVER_VARIANTS = {
 def quiet_warp() -> None:
     """Keep Warp's banner and module-load messages off stdout, so that a benchmark's stdout carries
     only its JSON lines (always, whatever ``$WARPDEM_WARP_VERBOSE`` says)."""
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
-    else:
-        wp.config.quiet = True
+    from .warp_output import quiet_warp as quiet
+
+    quiet(always=True)
 
 
 def kernel_resources(kernel: "wp.Kernel", device: str, block_dim: int = 256) -> dict | None:

@@ -15,10 +15,11 @@ __all__ = ["quiet_warp", "VERBOSE_ENV"]
 VERBOSE_ENV = "WARPDEM_WARP_VERBOSE"
 
 
-def quiet_warp() -> None:
+def quiet_warp(always: bool = False) -> None:
     """Show only Warp's warnings and errors (no banner, no module-load lines), unless
-    ``$WARPDEM_WARP_VERBOSE`` is set to a non-empty value other than 0."""
-    if os.environ.get(VERBOSE_ENV, "") not in ("", "0"):
+    ``$WARPDEM_WARP_VERBOSE`` is set to a non-empty value other than 0 (``always``: whatever it says,
+    e.g. for a benchmark whose stdout must carry only its JSON lines)."""
+    if not always and os.environ.get(VERBOSE_ENV, "") not in ("", "0"):
         return
     if hasattr(wp, "LOG_WARNING") and hasattr(wp.config, "log_level"):
         wp.config.log_level = wp.LOG_WARNING
