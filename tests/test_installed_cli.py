@@ -30,10 +30,12 @@ def installed(tmp_path_factory):
     py = env_dir / "bin" / "python"
     own_site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                               capture_output=True, text=True, check=True).stdout.strip()
-    parents = dict.fromkeys(sysconfig.get_paths()[k] for k in ("purelib", "platlib"))
-    Path(own_site, "zz_test_parent_env.pth").write_text("".join(f"{p}\n" for p in parents))
+    # install the wheel first: with the parent's packages already on the path, pip would find the
+    # parent's warpdem (the CI's non-editable install) "already satisfied" and install nothing
     whl = next(wheels.glob("warpdem-*.whl"))
     subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", "--no-index", str(whl)], check=True)
+    parents = dict.fromkeys(sysconfig.get_paths()[k] for k in ("purelib", "platlib"))
+    Path(own_site, "zz_test_parent_env.pth").write_text("".join(f"{p}\n" for p in parents))
     return env_dir
 
 
