@@ -94,8 +94,9 @@ ROLLING = CandidateEffect("rolling_resistance", (EffectParameter("mu_r", "-", 0.
 COHESION = CandidateEffect("cohesion", (EffectParameter("cohesion_energy_density", "kJ/m3", 0.0, 5.0, 0.0),),
                            "cohesion")
 SHAPE = CandidateEffect("shape", (EffectParameter("aspect_ratio", "-", 1.0, 2.0, 1.0),), "particle shape")
+# the analytic "lab" below is the model itself (no model error): model_discrepancy "none"
 FAST = DiagnosisSettings(design_points_per_parameter=8, min_design_points=12, replicates=2, scan_points=4096,
-                         evidence_samples=4096, refine_points=6, gp_restarts=1)
+                         evidence_samples=4096, refine_points=6, gp_restarts=1, model_discrepancy="none")
 DRUM_60 = ProposedMeasurement("drum/60rpm/dynamic_angle", "drum", "dynamic_angle", "deg", {"rpm": 60},
                               "drum angle at 60 rpm")
 DRUM_10 = ProposedMeasurement("drum/10rpm/dynamic_angle", "drum", "dynamic_angle", "deg", {"rpm": 10},

@@ -35,7 +35,7 @@ SPACE = ParameterSpace((Parameter("a", 0.0, 1.0), Parameter("b", 0.0, 1.0)))
 BUMP = CandidateEffect("bump", (EffectParameter("c", "-", 0.0, 1.0, 0.0),), "the bump effect")
 TRUTH = {"a": 0.4, "b": 0.6, "c": 0.3}
 SETTINGS = dict(design_points_per_parameter=5, min_design_points=8, replicates=2, scan_points=4096,
-                evidence_samples=2048, refine_points=4, gp_restarts=1, add=("bump",))
+                evidence_samples=2048, refine_points=4, gp_restarts=1, add=("bump",), model_discrepancy="none")
 
 
 class BumpModel(ForwardModel):

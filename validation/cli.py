@@ -166,6 +166,11 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
         forward.check_experiments()
     except ConfigError as exc:
         raise ConfigError(f"measurements: {mpath}: {exc}") from None
+    disc = cfg.diagnosis.model_discrepancy
+    unknown = sorted(set(disc) - set(observations.keys)) if isinstance(disc, dict) else []
+    if unknown:
+        raise ConfigError(f"diagnosis.model_discrepancy: unknown observable(s) {unknown}; the measurement file "
+                          f"has {list(observations.keys)}")
     settings = DiagnosisSettings(**{**cfg.diagnosis.model_dump(), "add": tuple(dict.fromkeys(added))})
     return observations, ParameterSpace(tuple(plist)), [e.candidate for e in effects], forward, settings, out
 

@@ -25,6 +25,7 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
     add: []                           # effects to add whatever the ranking (--add EFFECT)
     proposals: auto                   # conditions to forecast when candidates tie, or a list
     diagnosis: {replicates: 2}        # validation.settings.DiagnosisSettings fields, e.g.
+                                      # model_discrepancy: fidelity (none | {KEY: sd}): model error
                                       # designs_up_front: auto (true | false): every design in one call
                                       # replicated_fraction: 1.0 (0.34: a third of the sets replicated)
 """
@@ -35,7 +36,7 @@ import os
 from pathlib import Path
 from typing import Optional, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, NonNegativeFloat, ValidationError, field_validator
 
 from warpdem import ConfigError
 from warpdem.config_io import check_device, load_config_file, parse_processes
@@ -79,7 +80,7 @@ class DiagnosisSection(_Strict):
     separation_sigma: float = Field(2.0, gt=0)
     max_added_effects: int = Field(1, ge=0)
     rank_when_adequate: bool = False
-    model_discrepancy: dict[str, float] = Field(default_factory=dict)
+    model_discrepancy: Union[Literal["fidelity", "none"], dict[str, NonNegativeFloat]] = "fidelity"
     max_conflict_size: int = Field(3, ge=1)
     gp_restarts: int = Field(2, ge=0)
     cv_folds: int = Field(5, ge=2)

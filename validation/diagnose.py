@@ -63,6 +63,7 @@ from .discrimination import Discrimination, discriminate
 from .effects import CandidateEffect, ModelVersion
 from .forward import ForwardModel, ForwardRunner, merges_versions, runs_on_cuda, worlds_per_run
 from .history import ErrorHistory, VersionErrors, version_errors
+from .model_error import DiscrepancyTerm, resolve_model_discrepancy
 from .observables import Observable, Observations
 from .pooled import run_as_workers
 from .ranking import CandidateResult, candidate_sentence, effect_signature, rank_candidates
@@ -106,6 +107,7 @@ class DiagnosisResult:
     headline, details : the verdict in words.  next_steps : what to do next.
     forward : forward-model calls, runs, failed runs and seconds.  seconds : wall time per stage.
     caveats : why the verdict's basis is weak (:func:`data_cannot_tell`); the report shows it amber.
+    model_error : the model-discrepancy sd given to each observable and its source (:mod:`validation.model_error`).
     """
 
     observations: Observations
@@ -121,6 +123,7 @@ class DiagnosisResult:
     seconds: dict[str, float]
     candidates: tuple[CandidateEffect, ...] = field(default_factory=tuple)
     caveats: list[str] = field(default_factory=list)
+    model_error: tuple[DiscrepancyTerm, ...] = ()
 
     @property
     def base(self) -> ModelStudy:
@@ -155,6 +158,7 @@ class DiagnosisResult:
             "observables": [o.to_dict() for o in self.observations],
             "candidates": [c.to_dict() for c in self.candidates],
             "settings": self.settings.to_dict(),
+            "model_error": [t.to_dict() for t in self.model_error],
             "versions": [v.to_dict() for v in self.versions],
             "rounds": [r.to_dict() for r in self.rounds],
             "error_history": self.history.to_dict(),
@@ -419,6 +423,10 @@ def _check_inputs(observables, base_space, candidates, forward_model, settings) 
     unknown = [a for a in settings.add if a not in names]
     if unknown:
         raise ValueError(f"settings.add names effects that are not candidates: {unknown}; candidates: {names}")
+    if not isinstance(settings.model_discrepancy, str):
+        unknown = sorted(set(settings.model_discrepancy) - set(obs.keys))
+        if unknown:
+            raise ValueError(f"model_discrepancy names unknown observables {unknown}; known: {list(obs.keys)}")
     if not isinstance(forward_model, ForwardModel) and not callable(getattr(forward_model, "evaluate", None)):
         raise TypeError(f"forward_model must implement validation.forward.ForwardModel, got {type(forward_model).__name__}")
     return obs, cands
@@ -545,8 +553,9 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     cannot_tell = data_cannot_tell(base.adequacy) if len(versions) == 1 else None
     caveats = [cannot_tell] if cannot_tell else []
     caveats += [why for why in map(weak_choice, rounds) if why]
+    model_error = tuple(resolve_model_discrepancy(settings.model_discrepancy, obs)[1])
     return DiagnosisResult(obs, settings, versions, rounds, history, met, headline, details, steps,
-                           {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands, caveats)
+                           {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands, caveats, model_error)
 
 
 def _designs_up_front(obs: Observations, base_space: ParameterSpace, cands: tuple[CandidateEffect, ...],

@@ -10,8 +10,9 @@ with y_i the measured mean of n_i repeats and SE_i its standard error; s_DEM,i t
 fill-to-fill sd (the model's own prediction of the scatter of an n_i-fill mean: with 3 repeats
 the lab SE is itself uncertain -- a chi^2 with 2 dof falls below a quarter of its mean 22 % of
 the time -- and adding the model's estimate is conservative, at most doubling the noise
-variance); Var_disc,i an optional model-discrepancy variance (Kennedy & O'Hagan 2001; zero by
-default: the point here is to explain the discrepancy by a named effect); and Var_sim,i(x) the
+variance); Var_disc,i the model-discrepancy variance (Kennedy & O'Hagan 2001): how far two DEM
+codes with the same named law differ, by default from the fidelity suite against LIGGGHTS
+(:mod:`validation.model_error`; ``"none"``: zero, the simulator treated as exact); and Var_sim,i(x) the
 variance of the simulated value -- the surrogate's latent variance, or ``s_DEM,i^2 / R`` for the
 mean of R confirmation runs.  ``z > 0``: the model is too low.
 
@@ -77,7 +78,7 @@ class Misfit:
 
     @classmethod
     def build(cls, observations: Observations, dem_noise_sd: np.ndarray,
-              discrepancy_sd: Mapping[str, float] | None = None,
+              discrepancy_sd: str | Mapping[str, float] | None = None,
               dem_noise_dof: np.ndarray | None = None) -> "Misfit":
         m = len(observations)
         noise = np.asarray(dem_noise_sd, float)
@@ -86,6 +87,10 @@ class Misfit:
         dof = np.full(m, np.inf) if dem_noise_dof is None else np.asarray(dem_noise_dof, float)
         if dof.shape != (m,) or np.any(dof < 0):
             raise ValueError(f"dem_noise_dof must be {m} values >= 0, got {dof}")
+        if isinstance(discrepancy_sd, str):  # "fidelity" / "none": resolved against these observables
+            from .model_error import resolve_model_discrepancy
+
+            discrepancy_sd = resolve_model_discrepancy(discrepancy_sd, observations)[0]
         disc = dict(discrepancy_sd or {})
         unknown = sorted(set(disc) - set(observations.keys))
         if unknown:
@@ -99,6 +104,17 @@ class Misfit:
             raise ValueError(f"observables {zero} have zero measurement error and zero DEM noise: every misfit would "
                              "be infinite; give them a reading resolution (censored ones too) or a model_discrepancy")
         return out
+
+    def variance_shares(self, sim_sd: np.ndarray) -> dict[str, np.ndarray]:
+        """What each observable's sigma^2 is made of, as fractions summing to 1 (m,) each:
+        ``measurement`` SE^2, ``dem_noise`` s_DEM^2 / n, ``model_error`` Var_disc and ``simulation``
+        the simulated value's variance (surrogate or confirmation mean)."""
+        o = self.observations
+        parts = {"measurement": o.standard_errors ** 2, "dem_noise": self.dem_noise_sd ** 2 / o.n,
+                 "model_error": self.discrepancy_sd ** 2,
+                 "simulation": np.broadcast_to(np.asarray(sim_sd, float) ** 2, (len(o),))}
+        total = sum(parts.values())
+        return {k: np.where(total > 0, v / np.where(total > 0, total, 1.0), 0.0) for k, v in parts.items()}
 
     @property
     def fixed_variance(self) -> np.ndarray:

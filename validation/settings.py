@@ -46,7 +46,10 @@ class DiagnosisSettings:
     max_added_effects : how many effects may be added in turn (base, base+A, base+A+B, ...).
     add : effect names to add regardless of the ranking (the config line / ``--add EFFECT``).
     rank_when_adequate : rank the candidates even when the base model is adequate.
-    model_discrepancy : optional model-discrepancy sd per observable key (in its unit).
+    model_discrepancy : the model error added to every observable's variance (Kennedy & O'Hagan
+        2001; :mod:`validation.model_error`): ``"fidelity"`` (default: per quantity from the
+        warpdem-vs-LIGGGHTS fidelity suite, e.g. 1.3 deg on a static angle), ``"none"`` (the
+        simulator treated as exact) or a mapping observable key -> sd in its unit (others 0).
     max_conflict_size : largest observable subset searched for conflicts.
     gp_restarts, cv_folds : surrogate hyperparameter restarts and cross-validation folds.
     seed : seed of every design, scan and sample.
@@ -89,7 +92,7 @@ class DiagnosisSettings:
     max_added_effects: int = 1
     add: tuple[str, ...] = ()
     rank_when_adequate: bool = False
-    model_discrepancy: Mapping[str, float] = field(default_factory=dict)
+    model_discrepancy: str | Mapping[str, float] = "fidelity"
     max_conflict_size: int = 3
     gp_restarts: int = 2
     cv_folds: int = 5
@@ -125,10 +128,21 @@ class DiagnosisSettings:
         if isinstance(self.add, str):
             raise ValueError(f"DiagnosisSettings.add must be a tuple of effect names, got the string {self.add!r}")
         object.__setattr__(self, "add", tuple(self.add))
-        object.__setattr__(self, "model_discrepancy", MappingProxyType(dict(self.model_discrepancy)))
+        v = self.model_discrepancy
+        if isinstance(v, str):
+            if v not in ("fidelity", "none"):
+                raise ValueError(f"DiagnosisSettings.model_discrepancy must be 'fidelity', 'none' or a mapping "
+                                 f"observable key -> sd, got {v!r}")
+        else:
+            bad = {k: x for k, x in dict(v).items() if isinstance(x, bool) or not isinstance(x, (int, float))
+                   or not (math.isfinite(x) and x >= 0)}
+            if bad:
+                raise ValueError(f"DiagnosisSettings.model_discrepancy values must be finite sds >= 0, got {bad}")
+            object.__setattr__(self, "model_discrepancy", MappingProxyType(dict(v)))
 
     def to_dict(self) -> dict:
         d = dict(self.__dict__)
         d["add"] = list(self.add)
-        d["model_discrepancy"] = dict(self.model_discrepancy)
+        v = self.model_discrepancy
+        d["model_discrepancy"] = v if isinstance(v, str) else dict(v)
         return d

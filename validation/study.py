@@ -294,9 +294,13 @@ class ModelStudy:
         """One row per observable: measured vs simulated (surrogate and DEM confirmation) with z."""
         obs, m = self.misfit.observations, self.misfit
         sigma = np.sqrt(m.variance(self.best.sd))
+        c = self.confirmation
+        conf_noise = self.noise_sd if c.noise_sd is None else c.noise_sd
+        dem_sim_sd = conf_noise / np.sqrt(np.maximum(c.n_ok, 1))
+        shares = m.variance_shares(dem_sim_sd)
+        dem_sigma = np.sqrt(m.variance(dem_sim_sd))
         rows = []
         for j, o in enumerate(obs):
-            c = self.confirmation
             rows.append({
                 "key": o.key, "label": o.name, "unit": o.unit, "censored": o.is_censored,
                 "measured_mean": None if o.is_censored else o.mean,
@@ -304,7 +308,11 @@ class ModelStudy:
                 "surrogate_mean": float(self.best.mu[j]), "surrogate_sd": float(self.best.sd[j]),
                 "dem_noise_sd": float(self.noise_sd[j]), "sigma": float(sigma[j]), "z": float(self.best.z[j]),
                 "dem_mean": float(c.mean[j]), "dem_spread": float(c.spread[j]), "dem_runs": int(c.n_ok[j]),
-                "dem_z": float(c.z[j]),
+                "dem_z": float(c.z[j]), "dem_sigma": float(dem_sigma[j]),
+                "model_error_sd": float(m.discrepancy_sd[j]),
+                # what the DEM z's sigma^2 is made of (fractions): lab repeats, the DEM's fill noise at the
+                # lab's n, model error (validation.model_error), the confirmation mean's own noise
+                "dem_sigma_shares": {k: float(v[j]) for k, v in shares.items()},
             })
         return rows
 
