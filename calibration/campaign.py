@@ -43,80 +43,33 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import warp as wp
-from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 import warpdem as wd
 from warpdem import ConfigError
 from warpdem.config_io import check_device, check_output_folder, load_config_file
+from warpdem.config_schema import raise_problems, validate_section
 
 from .campaign_records import (RECORD_FORMAT, append_records, code_version, describe_differences, fingerprint,
                                is_campaign_record, plain, plugin_hashes, read_records, write_atomic)
+from .campaign_schema import (SECTIONS_ALLOWED_EMPTY, CampaignFile, CheckpointSettings, ResponseSection,
+                              TargetFromDEM, TargetFromFile, VtkOutput)
 from .designs import Parameter, ParameterSpace, latin_hypercube
 from .experiments import make_experiment
 from .experiments.checkpoints import BatchCheckpoints, clear_checkpoints
 from .executor import RayExecutor, executor_from_config
 from .experiments.common import _jsonable, cpu_processes
+from .measurement.errors import MeasurementError
 from .measurement.records import load_measurements
 from .model_description import ModelDescription
 
-TOP_KEYS = {"name", "device", "processes", "executor", "output", "contact_law", "material", "plugins", "parameters", "fixed", "design", "batch_worlds",
-            "responses", "validation", "optimisation", "confirmation", "surrogate", "sensitivity", "fills", "vtk",
-            "checkpoints"}
 FILL_MODES = ("independent", "shared")
 # first loose-fill index of each kind of DEM run when fills are independent: design sample i uses
 # fills i*replicates ..., so the target, the confirmation rounds and the validation never reuse a
 # fill of the design or of each other (no accidental common random numbers)
 TARGET_FILLS, CONFIRMATION_FILLS, VALIDATION_FILLS = 1_000_000, 2_000_000, 3_000_000
-RESPONSE_KEYS = {"name", "experiment", "scale", "settings", "target", "replicates"}
 
 
 # ----------------------------------------------------------------------------- configuration
-class VtkOutput(BaseModel):
-    """Config section ``vtk``: which DEM runs of a campaign write a ParaView time series
-    (``particles.pvd`` and ``wall_<name>.pvd`` with the experiment's VTK fields).
-
-    every: simulated time between frames [s]. samples: design sample indices to record (default
-    none). replicate: which of a sample's loose fills (world) to record, when a response runs
-    ``replicates`` > 1. targets / confirmation / validation: also record the first DEM run of each
-    response's DEM target, of each confirmation round, of the validation. folder: under the
-    campaign's output folder (or absolute); one sub-folder per run, e.g. ``sample_003/<response>``.
-    """
-
-    model_config = ConfigDict(extra="forbid")
-    every: float = Field(gt=0, allow_inf_nan=False)
-    samples: list[int] = Field(default_factory=list)
-    replicate: int = Field(0, ge=0)
-    targets: bool = False
-    confirmation: bool = False
-    validation: bool = False
-    folder: str = Field("vtk", min_length=1)
-
-    @field_validator("samples")
-    @classmethod
-    def _inside_design(cls, v: list[int], info: ValidationInfo) -> list[int]:
-        n = (info.context or {}).get("design_samples")
-        bad = [i for i in v if i < 0 or (n is not None and i >= n)]
-        if bad:
-            raise ValueError(f"sample index(es) {bad} outside the design" +
-                             (f" (design.samples = {n}: indices 0-{n - 1})" if n is not None else " (indices start at 0)"))
-        if len(set(v)) != len(v):
-            raise ValueError(f"sample index(es) listed twice: {sorted({i for i in v if v.count(i) > 1})}")
-        return sorted(v)
-
-
-class CheckpointSettings(BaseModel):
-    """Config section ``checkpoints``: a campaign's batches save their simulation into
-    ``<output>/checkpoints/`` while they run, so a killed campaign resumes mid-batch
-    (:class:`calibration.experiments.checkpoints.BatchCheckpoints`; docs/campaign_records.md).
-
-    enabled: checkpoint the batches (default true). every_s: wall-clock seconds between saves [s]
-    (>= 0; a save also ends every batch's protocol)."""
-
-    model_config = ConfigDict(extra="forbid")
-    enabled: bool = True
-    every_s: float = Field(120.0, ge=0, allow_inf_nan=False)
-
-
 @dataclass
 class Response:
     """A measured response: an experiment, its settings, and the target it must match [deg]."""
@@ -125,7 +78,7 @@ class Response:
     experiment: str
     scale: str = "quick"
     settings: dict[str, Any] = field(default_factory=dict)
-    target: Any = None  # float [deg], {file, experiment, condition}, or {dem_at: {parameters}}
+    target: Any = None  # float [deg], {file, experiment, condition}, or {dem_at: {parameters}, runs}
     replicates: int = 1  # DEM runs per sample with different loose fills (extra worlds), averaged
     target_deg: float | None = None
     target_std_deg: float | None = None
@@ -161,94 +114,24 @@ class CampaignConfig:
     base_dir: Path = Path(".")
 
 
-def _check_sections(raw: Mapping[str, Any], source: str) -> tuple[VtkOutput | None, CheckpointSettings]:
-    """Sub-keys and values of the optimisation, confirmation, sensitivity, surrogate, design, vtk
-    and checkpoints sections (pydantic): an unknown key such as ``confirmation: {run: 5}`` is an
-    error, not a silent default. Every problem is listed with its path. Returns the parsed ``vtk``
-    and ``checkpoints`` sections."""
-    from pydantic import ValidationError
-
-    class _S(BaseModel):
-        model_config = ConfigDict(extra="forbid")
-
-    class Optimisation(_S):
-        pop_size: int = Field(100, ge=4)
-        n_generations: int = Field(100, ge=1)
-        seed: int = Field(1, ge=0)
-        tolerance_deg: float | list[float] | None = None
-        n_dense: int = Field(50_000, ge=100)
-
-    class Confirmation(_S):
-        runs: int = Field(1, ge=1)
-        refine_rounds: int = Field(0, ge=0)
-
-    class Sensitivity(_S):
-        n: int = Field(4096, ge=16)
-
-    class Surrogate(_S):
-        n_splits: int = Field(5, ge=2)
-        n_repeats: int = Field(2, ge=1)
-
-    class Design(_S):
-        samples: int = Field(24, ge=2)
-        held_out: int = Field(6, ge=0)
-        seed: int = Field(0, ge=0)
-
-    class Sections(BaseModel):
-        model_config = ConfigDict(extra="ignore")
-        optimisation: Optimisation = Field(default_factory=Optimisation)
-        confirmation: Confirmation = Field(default_factory=Confirmation)
-        sensitivity: Sensitivity = Field(default_factory=Sensitivity)
-        surrogate: Surrogate = Field(default_factory=Surrogate)
-        design: Design = Field(default_factory=Design)
-        vtk: VtkOutput | None = None
-        checkpoints: CheckpointSettings = Field(default_factory=CheckpointSettings)
-
-    present = {k: (raw.get(k) or {}) for k in ("optimisation", "confirmation", "sensitivity", "surrogate", "design",
-                                               "checkpoints")}
-    if raw.get("vtk") is not None:
-        present["vtk"] = raw["vtk"]
-    n_design = (raw.get("design") or {}).get("samples", 24) if isinstance(raw.get("design") or {}, Mapping) else None
-    try:
-        sections = Sections.model_validate(
-            present, context={"design_samples": n_design if isinstance(n_design, int) else None})
-    except ValidationError as exc:
-        lines = []
-        for e in exc.errors():
-            path = ".".join(str(p) for p in e["loc"])
-            msg = "unknown key" if e["type"] == "extra_forbidden" else e["msg"].removeprefix("Value error, ")
-            lines.append(f"  {path}: {msg} (got {e.get('input')!r})")
-        raise ConfigError(f"{source}: {len(lines)} problem(s) in the config:\n" + "\n".join(lines)) from None
-    tol = (raw.get("optimisation") or {}).get("tolerance_deg")
-    if tol is not None and any(float(t) <= 0 for t in np.atleast_1d(tol)):
-        raise ConfigError(f"{source}: optimisation.tolerance_deg must be > 0 deg, got {tol!r}")
-    return sections.vtk, sections.checkpoints
-
-
-def _whole_number(value: Any, where: str, minimum: int = 1) -> int:
-    """``value`` as an integer >= ``minimum`` (``2`` or ``2.0``; not ``two``, ``true`` or ``2.5``)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not float(value).is_integer() \
-            or value < minimum:
-        raise ConfigError(f"{where} must be a whole number >= {minimum}, got {value!r}")
-    return int(value)
+def _response_of(section: ResponseSection) -> Response:
+    target = section.target
+    if isinstance(target, (TargetFromFile, TargetFromDEM)):
+        target = target.model_dump()
+    return Response(name=section.name, experiment=section.experiment, scale=section.scale,
+                    settings=dict(section.settings), target=target, replicates=section.replicates)
 
 
 def _response(d: Any, where: str) -> Response:
-    if not isinstance(d, Mapping):
-        raise ConfigError(f"{where}: expected a mapping with keys {sorted(RESPONSE_KEYS)}, got {d!r}")
-    unknown = set(d) - RESPONSE_KEYS
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {sorted(unknown)}; valid: {sorted(RESPONSE_KEYS)}")
-    for k in ("name", "experiment"):
-        if k not in d:
-            raise ConfigError(f"{where}: missing '{k}'")
-    rep = _whole_number(d.get("replicates", 1), f"{where}: replicates")
-    vtk_keys = sorted(k for k in (d.get("settings") or {}) if str(k).startswith("vtk_"))
-    if vtk_keys:
-        raise ConfigError(f"{where}: settings {vtk_keys}: a campaign asks for VTK output in its top-level "
-                          "'vtk' section (vtk: {every: 0.05, samples: [0]}), which gives every run its own folder")
-    return Response(name=str(d["name"]), experiment=str(d["experiment"]), scale=str(d.get("scale", "quick")),
-                    settings=dict(d.get("settings") or {}), target=d.get("target"), replicates=rep)
+    """One response section (``responses[i]`` or ``validation``) checked by its schema."""
+    return _response_of(validate_section(ResponseSection, d, where))
+
+
+def target_file(target: Mapping[str, Any], base_dir: Path) -> Path:
+    """The measurement file of a ``{file, experiment, condition}`` target: relative to the working
+    folder if it is there, else to the config's folder ``base_dir``."""
+    path = Path(target["file"])
+    return path if path.is_absolute() or path.exists() else base_dir / path
 
 
 def load_config(path: str | os.PathLike) -> CampaignConfig:
@@ -258,102 +141,124 @@ def load_config(path: str | os.PathLike) -> CampaignConfig:
     return parse_config(raw, base_dir=path.parent, source=str(path))
 
 
-def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>") -> CampaignConfig:
-    if not isinstance(raw, Mapping):
-        raise ConfigError(f"{source}: top level must be a mapping")
-    unknown = set(raw) - TOP_KEYS
-    if unknown:
-        raise ConfigError(f"{source}: unknown key(s) {sorted(unknown)}; valid: {sorted(TOP_KEYS)}")
-    for k in ("parameters", "responses"):
-        if k not in raw:
-            raise ConfigError(f"{source}: missing '{k}'")
-    vtk, checkpoints = _check_sections(raw, source)
-    model = ModelDescription.from_config(raw, base_dir=base_dir, where=source)
-    params = raw["parameters"]
-    if not isinstance(params, Mapping) or not params:
-        raise ConfigError(f"{source}: 'parameters' must map parameter names to [lower, upper]")
-    plist = []
-    for name, bounds in params.items():
-        # unknown names and ranges outside the sub-model's admissible bounds fail here, before any DEM
-        lo, hi = model.check_bounds(name, bounds, f"{source}: parameters")
+def _model_problems(raw: Mapping[str, Any], doc: CampaignFile, base_dir: Path,
+                    problems: list[str]) -> tuple[ModelDescription | None, list[Parameter], dict[str, float]]:
+    """The model (contact law, material, plugins), the calibrated parameters (names declared by
+    the law or the material's shape family, ranges within their admissible bounds) and the fixed
+    ones; each problem appended to ``problems``."""
+    try:
+        model = ModelDescription.from_config(raw, base_dir=base_dir)
+    except ConfigError as exc:
+        problems.append(str(exc))
+        return None, [], {}
+    plist, fixed = [], {}
+    for name, bounds in doc.parameters.items():
+        try:  # unknown names and ranges outside the sub-model's admissible bounds fail here, before any DEM
+            lo, hi = model.check_bounds(name, list(bounds), "parameters")
+        except ConfigError as exc:
+            problems.append(str(exc))
+            continue
         spec = model.parameter_specs()[name]
         plist.append(Parameter(name, lo, hi, spec.unit, spec.description))
-    fixed_raw = raw.get("fixed") or {}
-    if not isinstance(fixed_raw, Mapping):
-        raise ConfigError(f"{source}: 'fixed' must map parameter names to values, got {fixed_raw!r}")
-    fixed = {k: model.check_value(k, v, f"{source}: fixed") for k, v in fixed_raw.items()}
-    for k in fixed:
-        if k in params:
-            raise ConfigError(f"{source}: '{k}' is both calibrated and fixed")
-    design = dict(raw.get("design") or {})
-    bad = set(design) - {"samples", "held_out", "seed"}
-    if bad:
-        raise ConfigError(f"{source}: design: unknown key(s) {sorted(bad)}; valid: ['held_out', 'samples', 'seed']")
-    cfg = CampaignConfig(
-        name=str(raw.get("name", Path(source).stem)), space=ParameterSpace(tuple(plist)),
-        responses=[_response(r, f"{source}: responses[{i}]") for i, r in enumerate(raw["responses"])],
-        validation=_response(raw["validation"], f"{source}: validation") if raw.get("validation") else None,
-        fixed=fixed, model=model, samples=int(design.get("samples", 24)),
-        held_out=int(design.get("held_out", 6)), seed=int(design.get("seed", 0)),
-        batch_worlds=_whole_number(raw.get("batch_worlds", 8), f"{source}: batch_worlds"),
-        device=check_device(raw.get("device"), f"{source}: device", present=False), processes=raw.get("processes", "auto"),
-        fills=str(raw.get("fills", "independent")),
-        output=str(raw.get("output", "results/calibration")), optimisation=dict(raw.get("optimisation") or {}),
-        confirmation_runs=int((raw.get("confirmation") or {}).get("runs", 1)),
-        refine_rounds=int((raw.get("confirmation") or {}).get("refine_rounds", 0)),
-        surrogate=dict(raw.get("surrogate") or {}), sobol_n=int((raw.get("sensitivity") or {}).get("n", 2**12)),
-        vtk=vtk, checkpoints=checkpoints, base_dir=base_dir)
-    if not cfg.responses:
-        raise ConfigError(f"{source}: 'responses' is empty")
-    every = cfg.responses + ([cfg.validation] if cfg.validation else [])
-    names = [r.name for r in every]
+    for name, value in doc.fixed.items():
+        try:
+            fixed[name] = model.check_value(name, value, "fixed")
+        except ConfigError as exc:
+            problems.append(str(exc))
+    both = sorted(set(fixed) & set(doc.parameters))
+    if both:
+        problems.append(f"{both} both calibrated ('parameters') and fixed ('fixed'): keep each in one of them")
+    return model, plist, fixed
+
+
+def _response_problems(responses: Sequence[Response], cfg: CampaignConfig, doc: CampaignFile,
+                       problems: list[str]) -> None:
+    """Each response's experiment built with its settings and fill size (name, scale, setting
+    names, types and values), its target (DEM targets: every calibrated parameter, values in
+    their admissible ranges; file targets: the file, its experiment and condition exist) and the
+    VTK replicate; each problem appended to ``problems``."""
+    model = cfg.model
+    names = [r.name for r in responses]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
-        raise ConfigError(f"{source}: response name(s) {twice} given twice (responses and validation): each "
-                          "response's angles are filed under its name, so names must be unique")
-    for resp in every:  # each experiment is built now (name, scale, settings, fill size), not when its DEM starts
+        problems.append(f"response name(s) {twice} given twice (responses and validation): each response's angles "
+                        "are filed under its name, so names must be unique")
+    for resp in responses:
+        where = f"response '{resp.name}'"
         settings = dict(resp.settings)
         if model.material is not None and "material" not in settings:
             settings["material"] = model.material
-        try:
+        try:  # each experiment is built now, not when its DEM starts
             exp = make_experiment(resp.experiment, resp.scale, contact_law=model.contact_law, plugins=model.plugins,
                                   **settings)
             if exp.material is not None:  # the default (paper) material is checked when its run starts
                 exp.check_size(cfg.batch_worlds * resp.replicates)
         except ConfigError as exc:
-            raise ConfigError(f"{source}: response '{resp.name}': {exc}") from None
-    for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
+            problems.append(f"{where}: {exc}")
         t = resp.target
-        if isinstance(t, Mapping) and isinstance(t.get("dem_at"), Mapping):
-            # DEM targets at known parameters: names and values checked now, not after the design ran
+        if isinstance(t, Mapping) and "dem_at" in t:  # names and values now, not after the design ran
             for k, v in t["dem_at"].items():
-                model.check_value(k, v, f"{source}: response '{resp.name}' target dem_at")
-            missing = [p.name for p in plist if p.name not in t["dem_at"] and p.name not in cfg.fixed]
+                try:
+                    model.check_value(k, v, f"{where} target dem_at")
+                except ConfigError as exc:
+                    problems.append(str(exc))
+            calibrated = [p.name for p in cfg.space.parameters]
+            missing = [p for p in calibrated if p not in t["dem_at"] and p not in cfg.fixed]
             if missing:
-                raise ConfigError(f"{source}: response '{resp.name}' target dem_at: no value for the calibrated "
-                                  f"parameter(s) {missing}; a DEM target needs every one of {[p.name for p in plist]}")
-    tol = cfg.optimisation.get("tolerance_deg")
-    if isinstance(tol, (list, tuple)) and len(tol) != len(cfg.responses):
-        raise ConfigError(f"{source}: optimisation.tolerance_deg has {len(tol)} value(s) for {len(cfg.responses)} "
-                          f"response(s) {[r.name for r in cfg.responses]}: give one per response, in their order, "
-                          f"or a single number")
-    if not 0 <= cfg.held_out < cfg.samples - len(plist):
-        raise ConfigError(f"{source}: design.held_out ({cfg.held_out}) must leave more training samples than "
-                          f"parameters ({cfg.samples} samples, {len(plist)} parameters)")
-    if vtk is not None:
-        for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
-            if vtk.replicate >= resp.replicates:
-                raise ConfigError(f"{source}: vtk.replicate: {vtk.replicate} but response '{resp.name}' runs "
-                                  f"{resp.replicates} fill(s) per sample (replicate indices 0-{resp.replicates - 1})")
-    if cfg.batch_worlds < 1:
-        raise ConfigError(f"{source}: batch_worlds must be >= 1")
-    if cfg.fills not in FILL_MODES:
-        raise ConfigError(f"{source}: fills must be one of {list(FILL_MODES)}, got {cfg.fills!r}")
+                problems.append(f"{where} target dem_at: no value for the calibrated parameter(s) {missing}; a DEM "
+                                f"target needs every one of {calibrated}")
+        elif isinstance(t, Mapping) and "file" in t:  # the file and its condition now (--max-samples never reads it)
+            try:
+                load_measurements(target_file(t, cfg.base_dir)).condition(t["experiment"], t["condition"])
+            except (ConfigError, MeasurementError) as exc:
+                problems.append(f"{where} target: {exc}")
+        if cfg.vtk is not None and cfg.vtk.replicate >= resp.replicates:
+            problems.append(f"vtk.replicate: {cfg.vtk.replicate} but {where} runs {resp.replicates} fill(s) per "
+                            f"sample (replicate indices 0-{resp.replicates - 1})")
+
+
+def parse_config(raw: Any, base_dir: Path = Path("."), source: str = "<config>") -> CampaignConfig:
+    """A campaign config checked whole before any DEM runs: the schema
+    (:class:`~calibration.campaign_schema.CampaignFile`: every section, key and type), then what
+    depends on several sections; every problem is listed in one ConfigError naming ``source``."""
+    if isinstance(raw, Mapping):
+        raw = {k: v for k, v in raw.items() if not (k in SECTIONS_ALLOWED_EMPTY and v is None)}
+    design = raw.get("design") if isinstance(raw, Mapping) else None
+    n_design = design.get("samples", 24) if isinstance(design, Mapping) else None
+    doc = validate_section(CampaignFile, raw, source,
+                           context={"design_samples": n_design if isinstance(n_design, int) else None})
+    problems: list[str] = []
+    model, plist, fixed = _model_problems(raw, doc, base_dir, problems)
+    if model is None or len(plist) < len(doc.parameters):  # the rest is checked against the model
+        raise_problems(source, problems)
+    opt = doc.optimisation.model_dump(exclude_unset=True)
+    cfg = CampaignConfig(
+        name=doc.name if doc.name is not None else Path(source).stem, space=ParameterSpace(tuple(plist)),
+        responses=[_response_of(r) for r in doc.responses],
+        validation=_response_of(doc.validation) if doc.validation is not None else None,
+        fixed=fixed, model=model, samples=doc.design.samples, held_out=doc.design.held_out,
+        seed=doc.design.seed, batch_worlds=doc.batch_worlds, device=doc.device, processes=doc.processes,
+        fills=doc.fills, output=doc.output, optimisation=opt, confirmation_runs=doc.confirmation.runs,
+        refine_rounds=doc.confirmation.refine_rounds, surrogate=doc.surrogate.model_dump(exclude_unset=True),
+        sobol_n=doc.sensitivity.n, vtk=doc.vtk, checkpoints=doc.checkpoints, base_dir=base_dir)
+    try:
+        check_device(doc.device, "device", present=False)  # a GPU config loads anywhere; the run checks the device
+    except ConfigError as exc:
+        problems.append(str(exc))
+    _response_problems(cfg.responses + ([cfg.validation] if cfg.validation else []), cfg, doc, problems)
+    tol = opt.get("tolerance_deg")
+    if isinstance(tol, list) and len(tol) != len(cfg.responses):
+        problems.append(f"optimisation.tolerance_deg has {len(tol)} value(s) for {len(cfg.responses)} response(s) "
+                        f"{[r.name for r in cfg.responses]}: give one per response, in their order, or a single number")
+    if not cfg.held_out < cfg.samples - len(plist):
+        problems.append(f"design.held_out ({cfg.held_out}) must leave more training samples than parameters "
+                        f"({cfg.samples} samples, {len(plist)} parameters)")
     try:
         cpu_processes(cfg.processes, "cpu")
-        cfg.executor = executor_from_config(raw.get("executor"), cfg.processes, "executor")
+        cfg.executor = executor_from_config(doc.executor, cfg.processes, "executor")
     except ConfigError as exc:
-        raise ConfigError(f"{source}: {exc}") from None
+        problems.append(str(exc))
+    raise_problems(source, problems)
     return cfg
 
 
@@ -514,9 +419,7 @@ def resolve_target(resp: Response, cfg: CampaignConfig, log, vtk_folder: Path | 
     if not isinstance(t, Mapping):
         raise ConfigError(f"response '{resp.name}': target must be a number or a mapping, got {t!r}")
     if "file" in t:
-        path = Path(t["file"])
-        if not path.is_absolute() and not path.exists():
-            path = cfg.base_dir / path
+        path = target_file(t, cfg.base_dir)
         for k in ("experiment", "condition"):
             if k not in t:
                 raise ConfigError(f"response '{resp.name}': target from a file needs '{k}'")

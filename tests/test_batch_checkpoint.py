@@ -142,7 +142,7 @@ def test_checkpoints_config_section_is_checked():
     cfg = cp.parse_config(base)
     assert cfg.checkpoints.enabled and cfg.checkpoints.every_s == 120.0
     assert cp.parse_config({**base, "checkpoints": {"every_s": 5, "enabled": False}}).checkpoints.every_s == 5.0
-    with pytest.raises(wd.ConfigError, match=r"checkpoints.every_s: .*greater than or equal to 0"):
+    with pytest.raises(wd.ConfigError, match=r"checkpoints.every_s must be >= 0, got -1"):
         cp.parse_config({**base, "checkpoints": {"every_s": -1}})
     with pytest.raises(wd.ConfigError, match=r"checkpoints.evry_s: unknown key"):
         cp.parse_config({**base, "checkpoints": {"evry_s": 10}})

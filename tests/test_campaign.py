@@ -109,7 +109,7 @@ def test_target_design_confirmation_and_validation_never_share_a_fill(tmp_path, 
         done_order = [rec["index"] for rec in new if rec["response"] == name]
         fills = [f for resp, rng in fake_dem.fills if resp == name for f in rng]
         assert 1 not in done_order and fills == [i * r + j for i in done_order for j in range(r)], name
-    with pytest.raises(ConfigError, match="target: unknown key"):
+    with pytest.raises(ConfigError, match=r"target.run: unknown key; valid: dem_at, runs"):
         cp.resolve_target(cp._response({"name": "a", "experiment": "baffle",
                                         "target": {"dem_at": {"mu_s_pp": 0.4}, "run": 2}}, "t"), cfg, print)
 
@@ -315,12 +315,12 @@ def test_section_subkeys_and_values_checked_at_load():
 # ----------------------------------------------------------------------------- VTK on request (issue 13)
 def test_vtk_section_bad_inputs_name_the_key():
     """Each bad ``vtk`` section is refused at load with its key named."""
-    cases = [({"every": -0.05}, "vtk.every: Input should be greater than 0"),
+    cases = [({"every": -0.05}, "vtk.every must be > 0, got -0.05"),
              ({"every": 0.05, "samples": [0, 16]}, "vtk.samples: sample index(es) [16] outside the design "
                                                    "(design.samples = 16: indices 0-15)"),
              ({"every": 0.05, "samples": [-1]}, "vtk.samples: sample index(es) [-1] outside the design"),
              ({"every": 0.05, "sample": [1]}, "vtk.sample: unknown key"),
-             ({"samples": [1]}, "vtk.every: Field required"),
+             ({"samples": [1]}, "vtk.every is missing (required)"),
              ({"every": 0.05, "replicate": 1}, "vtk.replicate: 1 but response 'alpha' runs 1 fill(s)"),
              ({"every": 0.05, "samples": [2, 2]}, "vtk.samples: sample index(es) listed twice: [2]")]
     for section, message in cases:
@@ -328,7 +328,7 @@ def test_vtk_section_bad_inputs_name_the_key():
             cp.parse_config({**BASE, "vtk": section})
         assert message in str(exc.value), (section, str(exc.value))
     resp = {**BASE["responses"][0], "settings": {"vtk_every": 0.1}}
-    with pytest.raises(ConfigError, match=r"responses\[0\]: settings \['vtk_every'\].*top-level 'vtk' section"):
+    with pytest.raises(ConfigError, match=r"responses\[0\]\.settings: \['vtk_every'\].*top-level 'vtk' section"):
         cp.parse_config({**BASE, "responses": [resp, BASE["responses"][1]]})
     ok = cp.parse_config({**BASE, "vtk": {"every": 0.05, "samples": [15, 0]}})
     assert ok.vtk.samples == [0, 15] and ok.vtk.folder == "vtk" and not ok.vtk.targets

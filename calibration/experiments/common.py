@@ -242,6 +242,9 @@ class Experiment:
         unknown = sorted(set(overrides) - set(names))
         if unknown:
             raise ConfigError(f"{cls.name}: unknown setting(s) {unknown}; valid: {sorted(n for n in names if n != 'scale')}")
+        from .settings_schema import check_setting_types
+
+        overrides = check_setting_types(cls, overrides)  # fill_mass: true, seed: abc (the values: __post_init__)
         kw = {**cls.PRESETS[scale], **overrides, "scale": scale}
         return cls(**kw)
 
