@@ -51,7 +51,7 @@ def result(share: float) -> SimpleNamespace:
     why = data_cannot_tell(base.adequacy)
     return SimpleNamespace(observations=OBS, versions=[base], base=base, final=base, history=history(), met=met,
                            headline=headline, details=details, next_steps=steps, caveats=[why] if why else [],
-                           forward={"runs": 20}, seconds={"total": 120.0})
+                           forward={"runs": 20}, seconds={"total": 120.0}, none_of_candidates=False)
 
 
 @pytest.mark.parametrize("share, cannot_tell", [(1.0, True), (CANNOT_TELL_PLAUSIBLE_SHARE, True),

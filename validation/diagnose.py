@@ -70,8 +70,47 @@ from .ranking import CandidateResult, candidate_sentence, effect_signature, rank
 from .settings import DiagnosisSettings
 from .study import ModelStudy, confirm_study, local_noise_sentence, own_noise_sentence, refine_study, study_model
 
-__all__ = ["RankingRound", "DiagnosisResult", "diagnose", "planned_designs", "run_planned_designs",
+__all__ = ["RankingRound", "DiagnosisResult", "Unreached", "unreached_observables", "diagnose", "planned_designs", "run_planned_designs",
            "PlannedRun", "version_name", "data_cannot_tell", "CANNOT_TELL_PLAUSIBLE_SHARE"]
+
+
+@dataclass(frozen=True)
+class Unreached:
+    """An observable no candidate brings within the cut-off: its residual at the final best fit and
+    the smallest |z| any studied version reached (DEM-confirmed), with that version's name."""
+
+    key: str
+    label: str
+    final_z: float
+    best_abs_z: float
+    best_version: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"key": self.key, "label": self.label, "final_z": self.final_z, "best_abs_z": self.best_abs_z,
+                "best_version": self.best_version}
+
+
+def unreached_observables(versions: Sequence["ModelStudy"], rounds: Sequence["RankingRound"],
+                          settings: DiagnosisSettings, unsettled: Sequence[str] = ()) -> tuple[Unreached, ...]:
+    """Observables beyond ``settings.cutoff`` at the final version's DEM-confirmed best fit, when an
+    effect was added or an inadequate base model was ranked and none was (none raised the evidence), leaving out
+    those where the surrogate still disagrees with the DEM there (a better fit may exist: ``unsettled``).
+    The cut-off, not ``within_sigma``: with 7 honest observables one lies beyond 2 sigma in about a
+    third of the cases, beyond 3 sigma (Student t of the few repeats aside) in about 2 %."""
+    if len(versions) < 2 and (versions[0].adequacy.adequate or not rounds):
+        return ()
+    final = versions[-1]
+    obs = final.misfit.observations
+    z_final = _residual(final)
+    studies = list(versions) + [c.study for r in rounds for c in r.candidates]
+    out = []
+    for j, key in enumerate(obs.keys):
+        if not (np.isfinite(z_final[j]) and abs(z_final[j]) > settings.cutoff) or key in unsettled:
+            continue
+        best = min(((abs(float(_residual(st)[j])), st.name) for st in studies if np.isfinite(_residual(st)[j])),
+                   default=(abs(float(z_final[j])), final.name))
+        out.append(Unreached(key, obs[j].name, float(z_final[j]), best[0], best[1]))
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -124,6 +163,13 @@ class DiagnosisResult:
     candidates: tuple[CandidateEffect, ...] = field(default_factory=tuple)
     caveats: list[str] = field(default_factory=list)
     model_error: tuple[DiscrepancyTerm, ...] = ()
+    unreached: tuple[Unreached, ...] = ()
+
+    @property
+    def none_of_candidates(self) -> bool:
+        """True when no candidate (alone or with a second one) brings the data within reach: some
+        observable stays beyond the cut-off at the final DEM-confirmed best fit (:func:`unreached`)."""
+        return bool(self.unreached) or (not self.base_adequate and len(self.versions) == 1 and bool(self.rounds))
 
     @property
     def base(self) -> ModelStudy:
@@ -154,7 +200,9 @@ class DiagnosisResult:
                         "plausible_share": self.base.adequacy.plausible_fraction if self.base_adequate else None,
                         "added_effects": list(self.added_effects),
                         "surrogate_disagrees": self.surrogate_disagrees,
-                        "refinement_waves": len(self.final.refinement)},
+                        "refinement_waves": len(self.final.refinement),
+                        "none_of_candidates": self.none_of_candidates,
+                        "unreached": [u.to_dict() for u in self.unreached]},
             "observables": [o.to_dict() for o in self.observations],
             "candidates": [c.to_dict() for c in self.candidates],
             "settings": self.settings.to_dict(),
@@ -212,6 +260,12 @@ def _errors(study: ModelStudy, settings: DiagnosisSettings) -> VersionErrors:
     z = study.confirmation.z
     return version_errors(study.name, study.version.effect_names, study.version.space.dim,
                           study.misfit.observations.keys, z, settings.within_sigma)
+
+
+def _beyond(study: ModelStudy, sigma: float) -> list[str]:
+    """Observable keys whose DEM-confirmed residual at ``study``'s best fit lies beyond ``sigma``."""
+    z = _residual(study)
+    return [k for k, v in zip(study.misfit.observations.keys, z) if np.isfinite(v) and abs(v) > sigma]
 
 
 def _residual(study: ModelStudy) -> np.ndarray:
@@ -502,10 +556,23 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     for step in range(max(settings.max_added_effects, len(forced))):
         current = versions[-1]
         inadequate = not current.adequacy.adequate
-        if not remaining or not (inadequate or forced or settings.rank_when_adequate):
+        # after an effect was added: a second one is studied when observables remain beyond
+        # within_sigma at the DEM-confirmed best fit, or when the first was chosen from a tie (the pair)
+        leftover = step > 0 and bool(_beyond(current, settings.within_sigma))
+        tied_before = rounds[-1].tied if rounds and rounds[-1].chosen is not None else ()
+        pair_of_tie = step > 0 and len(tied_before) >= 2
+        needs_effect = inadequate or leftover or pair_of_tie
+        if not remaining or not (needs_effect or forced or settings.rank_when_adequate):
             break
+        pool = remaining
+        if pair_of_tie and not (inadequate or leftover or forced):
+            pool = [c for c in remaining if c.name in tied_before]  # only the pair(s) of the tie
+        if step > 0 and needs_effect and not forced:
+            why = (f"observables beyond {settings.within_sigma:g} sigma with {current.name}" if leftover or inadequate
+                   else f"'{tied_before[0]}' was chosen from a tie with {', '.join(tied_before[1:])}")
+            _say(f"studying a second effect on top of {current.name} ({why}): {', '.join(c.name for c in pool)}")
         t0 = time.perf_counter()
-        rnd = _rank_round(current, remaining, obs, runner, settings, _round_seed(settings, step), base_noise,
+        rnd = _rank_round(current, pool, obs, runner, settings, _round_seed(settings, step), base_noise,
                           designs if step == 0 else None)
         seconds["ranking"] += time.perf_counter() - t0
         if history is None:  # the base model's confirmation ran in the round
@@ -514,8 +581,13 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         top = rnd.top
         if forced:
             chosen, reason = forced.pop(0), "added as requested (settings.add)"
-        elif not inadequate:
+        elif not needs_effect:
             chosen, reason = None, f"the {current.name} is adequate: no effect is needed"
+        elif top.log_bayes <= settings.tie_log_bayes and step > 0:
+            chosen, reason = None, (f"no second effect raises the evidence over the {current.name} by more than a "
+                                    f"bare mention (best: {top.effect.words}, ln B = {top.log_bayes:+.1f} <= "
+                                    f"{settings.tie_log_bayes:.2f}): the pair is not supported, "
+                                    f"{current.name} is kept")
         elif top.log_bayes <= settings.tie_log_bayes:
             chosen, reason = None, (f"no candidate raises the evidence over the {current.name} by more than a bare "
                                     f"mention (best: {top.effect.words}, ln B = {top.log_bayes:+.1f} <= "
@@ -549,13 +621,16 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         _designs_used(up_front, ["base"] + ([c.name for c in cands] if rounds else []))
     seconds["total"] = time.perf_counter() - t_start
     seconds["forward_model"] = runner.seconds
-    met, headline, details, steps = _summarise(versions, rounds, history, settings)
+    unsettled = [] if versions[-1].check is None else list(versions[-1].check.disagreeing)
+    unreached = unreached_observables(versions, rounds, settings, unsettled)
+    met, headline, details, steps = _summarise(versions, rounds, history, settings, unreached)
     cannot_tell = data_cannot_tell(base.adequacy) if len(versions) == 1 else None
     caveats = [cannot_tell] if cannot_tell else []
     caveats += [why for why in map(weak_choice, rounds) if why]
     model_error = tuple(resolve_model_discrepancy(settings.model_discrepancy, obs)[1])
     return DiagnosisResult(obs, settings, versions, rounds, history, met, headline, details, steps,
-                           {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands, caveats, model_error)
+                           {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands, caveats, model_error,
+                           unreached)
 
 
 def _designs_up_front(obs: Observations, base_space: ParameterSpace, cands: tuple[CandidateEffect, ...],
@@ -660,7 +735,7 @@ def _single_fit_caveats(first, met: bool, within_sigma: float, unsettled: list[s
 
 
 def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: ErrorHistory,
-               settings: DiagnosisSettings) -> tuple[bool, str, list[str], list[str]]:
+               settings: DiagnosisSettings, unreached: Sequence[Unreached] = ()) -> tuple[bool, str, list[str], list[str]]:
     """Verdict headline, details and next steps in words."""
     base, final = versions[0], versions[-1]
     first, last = history.versions[0], history.versions[-1]
@@ -688,10 +763,26 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
                      "(drum speeds, the pile test, bulk density).")
     elif len(versions) == 1:
         headline = "This model cannot reproduce these measurements, and none of the candidate effects explains why"
+        if unreached:
+            headline += ": " + "; ".join(f"{u.label} (z {u.final_z:+.1f}; the closest any candidate came: |z| "
+                                         f"{u.best_abs_z:.1f}, {u.best_version})" for u in unreached)
         if rounds:
             details.append(rounds[-1].reason)
         steps.append("Consider effects beyond the candidates (or a model discrepancy), and check the measurements "
                      "named in the conflicts.")
+    elif unreached:
+        added = " and ".join(e.words for e in final.version.effects)
+        far = "; ".join(f"{u.label} (z {u.final_z:+.1f}; the closest any candidate came: |z| {u.best_abs_z:.1f}, "
+                        f"{u.best_version})" for u in unreached)
+        headline = (f"None of the candidate effects explains these measurements: even the best they do, "
+                    f"{final.name}, leaves {len(unreached)} of {last.n_observables} observables beyond "
+                    f"{settings.cutoff:g} sigma: {far}")
+        if not base.adequacy.adequate:
+            headline = "The base model cannot reproduce these measurements, and n" + headline[1:]
+        steps.append(f"Do not read {added} as the explanation: look for an effect beyond the candidates (a "
+                     "different particle-size distribution, another shape family, a plug-in sub-model: "
+                     "docs/adding_an_effect.md) or check the measurements of "
+                     + ", ".join(u.label for u in unreached) + ".")
     else:
         added = " and ".join(e.words for e in final.version.effects)
         no_value = [k for k, z in last.z.items() if not math.isfinite(z)]
@@ -759,7 +850,7 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
                      f"{waves_words}: add design points (refine_points, max_refine_waves, "
                      "design_points_per_parameter) and rerun before reading the misfit there as the model's.")
     off = [k for k, v in last.z.items() if not abs(v) <= w and k not in unsettled]
-    if off and len(versions) > 1:
+    if off and len(versions) > 1 and not unreached:
         steps.append(f"Still beyond {w:g} sigma: {', '.join(off)}; try the next candidate (max_added_effects) or "
                      "review these measurements.")
     weak = [q.key for q in final.surrogates.quality if q.r2 is not None and q.r2 < 0.8]

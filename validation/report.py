@@ -68,8 +68,8 @@ def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.
     round with what to measure next, the error history, surrogates and DEM noise."""
     obs = result.observations
     base = result.base
-    sections = [_comparison_section(result, figure_paths), _model_error_section(result),
-                *_adequacy_sections(result, figure_paths)]
+    sections = [_comparison_section(result, figure_paths), *_unreached_sections(result),
+                _model_error_section(result), *_adequacy_sections(result, figure_paths)]
     for i, rnd in enumerate(result.rounds):
         sections += _ranking_sections(result, rnd, i, figure_paths)
     if len(result.history.versions) > 1:
@@ -110,7 +110,8 @@ def _verdict(result: "DiagnosisResult") -> Verdict:
     # "cannot tell" when the data cannot show whether an effect is missing (one version); an effect
     # added on a weak choice is "met on a weak basis" (validation.diagnose.weak_choice)
     status = ("Cannot tell" if len(result.versions) == 1 else
-              "Met on a weak basis" if result.met else "Not met, on a weak basis") if caveats else ""
+              "Met on a weak basis" if result.met else "Not met, on a weak basis") if caveats else (
+        "Not met: none of the candidates" if result.none_of_candidates else "")
     return Verdict(met=result.met, headline=result.headline, details=result.details[:1], numbers=numbers,
                    caveats=caveats, status=status)
 
@@ -142,6 +143,21 @@ def _comparison_section(result: "DiagnosisResult", figure_paths: Mapping[str, os
         *_fig(figure_paths, "comparison", "Measured (black, mean ± standard error) and simulated (DEM mean ± "
                                           "spread over fills) values per experiment."),
     ])
+
+
+def _unreached_sections(result: "DiagnosisResult") -> list[Section]:
+    """The observables no candidate reaches (none when a candidate explains the data)."""
+    if not result.unreached:
+        return []
+    cut = result.settings.cutoff
+    rows = [[u.label, Cell(round(u.final_z, 1), "bad"), round(u.best_abs_z, 1), u.best_version] for u in result.unreached]
+    return [Section("Observables no candidate reaches", [
+        f"These observables stay beyond {cut:g} σ whatever candidate is added (alone or as a pair): the closest "
+        "any studied model version came is listed, DEM-confirmed at its own best fit. The missing physics is "
+        "not among the candidates, or these measurements deserve a second look.",
+        Table(["observable", f"z ({result.final.name})", "smallest |z| of any candidate", "reached by"], rows,
+              caption="No candidate reaches these"),
+    ])]
 
 
 def _model_error_section(result: "DiagnosisResult") -> Section:

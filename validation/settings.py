@@ -43,7 +43,10 @@ class DiagnosisSettings:
         effect is only added when its ln B over the current model exceeds it.
     separation_sigma : a proposed measurement separates two tied candidates when their predicted
         outcomes differ by at least this many combined sds (2).
-    max_added_effects : how many effects may be added in turn (base, base+A, base+A+B, ...).
+    max_added_effects : how many effects may be added in turn (base, base+A, base+A+B, ...). A
+        second effect is studied only when needed: observables remain beyond ``within_sigma`` at
+        the DEM-confirmed best fit with the first, or the first was chosen from a tie (then only the
+        tied candidates are tried with it: the pair). Default 2 (pairs).
     add : effect names to add regardless of the ranking (the config line / ``--add EFFECT``).
     rank_when_adequate : rank the candidates even when the base model is adequate.
     model_discrepancy : the model error added to every observable's variance (Kennedy & O'Hagan
@@ -89,7 +92,7 @@ class DiagnosisSettings:
     within_sigma: float = 2.0
     tie_log_bayes: float = math.log(3.0)
     separation_sigma: float = 2.0
-    max_added_effects: int = 1
+    max_added_effects: int = 2
     add: tuple[str, ...] = ()
     rank_when_adequate: bool = False
     model_discrepancy: str | Mapping[str, float] = "fidelity"
