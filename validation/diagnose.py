@@ -24,7 +24,13 @@
 4. the chosen effect (the top candidate, or ``settings.add``) is recalibrated with a second
    design wave and confirmed by DEM, and with further waves (up to ``max_refine_waves``) while
    the DEM at the best fit disagrees with the surrogate there; the error history records every
-   version (:mod:`validation.history`); repeated up to ``max_added_effects`` times while inadequate.
+   version (:mod:`validation.history`); repeated up to ``max_added_effects`` (2) times while
+   needed: the version is inadequate, or observables remain beyond ``within_sigma`` at its
+   DEM-confirmed best fit, or its effect was chosen from a tie (then only the tied candidates are
+   tried on top of it: the pair); a second effect is added only when it raises the evidence;
+5. when an observable stays beyond the cut-off whatever was added (:func:`unreached_observables`),
+   the verdict is "none of the candidate effects explains these measurements", with the closest
+   any studied version came, instead of offering the best of the losers as the explanation.
 
 Which studies get the disagreement-driven waves (:func:`validation.study.refine_study`): the
 recalibrated version always, and the base model when it is judged adequate -- in both cases that
