@@ -41,41 +41,25 @@ from typing import Any
 
 import numpy as np
 
+from warpdem.config_schema import raise_problems, validate_section
 from warpdem.errors import ConfigError, WarpDEMError
 
+from .config_schema import CONTACT_DEFAULTS, MAX_STEPS, PumpFile, cross_section_problems  # noqa: F401 (MAX_STEPS)
 from .design import PumpDesign
 from .geometry import COMPONENTS, REGIONS, PumpGeometry, blade_camber, build_pump, passage_clearances
 
-SECTIONS = {
-    "name": None, "device": None, "output": None, "seed": None, "design": None, "geometry": None, "fluid": None,
-    "coupling": None, "particles": None, "contact": None, "wall": None, "run": None, "wear": None, "gravity": None, "notes": None,
-}
-DEFAULTS = {
-    "geometry": {"resolution": 1.0, "meshes": {}, "mesh_scale": 1.0},
-    "fluid": {"density": 998.2, "viscosity": 1.002e-3, "grid_spacing": 0.003, "drag": "di_felice",
-              "added_mass": 0.5, "pressure_gradient": 1.0, "buoyancy": 1.0, "voidage_cell": 0.05},
-    "coupling": {"two_way": False, "relaxation": 1.0},
-    "particles": {"material": {"type": "spheres", "diameter": [0.010, 0.025]}, "volume_fraction": 0.01,
-                  "rate": None, "inject_from": 0.0, "inject_until": None},
-    # seed paper Sec. 4.2 optimum (friction) and Table 6 (restitution 0.6)
-    "contact": {"rolling": "epsd", "mu_s_pp": 0.323, "mu_r_pp": 0.061, "mu_s_pw": 0.316, "mu_r_pw": 0.441,
-                "restitution_pp": 0.6, "restitution_pw": 0.6},
-    "wall": {"youngs_modulus": 2.0e11, "poisson_ratio": 0.3, "density": 7850.0},
-    "run": {"revolutions": 15.0, "dt": 1.0e-5, "worlds": 1, "update_every": 5.0e-4, "record_every": 2.0e-3,
-            "vtk_every": 0.02, "max_contacts": 16, "steps_per_graph": 50, "trajectory_world": 0},
-    "wear": {"dnv_K": 2.0e-9, "dnv_n": 2.6, "target_density": 7800.0, "archard_k": 1.0e-2, "hardness": 1.18e9,
-             "finnie_k": 0.0, "spin_up_revolutions": 2.0, "block_revolutions": 1.0},
-}
-
-
-#: the most DEM steps a run may take (about 200 times the paper case's): a time step or revolution
-#: count that needs more is refused at load
-MAX_STEPS = 100_000_000
+SECTIONS = tuple(PumpFile.model_fields)
+#: each section's defaults (what a config that leaves a key out runs with)
+DEFAULTS = {name: PumpFile.model_fields[name].default_factory().model_dump()
+            for name in ("geometry", "fluid", "coupling", "particles", "wall", "run", "wear")}
+DEFAULTS["contact"] = dict(CONTACT_DEFAULTS)
 
 
 def load_config(path_or_dict: str | Path | dict, where: str | None = None) -> dict:
-    """Read and validate a pump config (YAML path or mapping); fills defaults, names bad keys.
-    ``where``: the file a mapping came from, for messages."""
+    """Read and check a pump config (YAML path or mapping) against its schema
+    (:class:`pump.config_schema.PumpFile`) and the rules between its sections; returns plain
+    sections with the defaults filled in. Every problem is listed in one ConfigError naming
+    ``where`` (the file a mapping came from) and each key."""
     if isinstance(path_or_dict, dict):
         raw = dict(path_or_dict)
         where = where or "config"
@@ -83,89 +67,25 @@ def load_config(path_or_dict: str | Path | dict, where: str | None = None) -> di
         from warpdem.config_io import load_config_file
 
         p = Path(path_or_dict)
-        raw = load_config_file(p, "pump config") or {}
-        if not isinstance(raw, dict):
-            raise ConfigError(f"{p}: a pump config must be a mapping of sections")
+        raw = load_config_file(p, "pump config")
+        if raw is None:
+            raise ConfigError(f"{p}: the file is empty; a pump config names at least its output and run "
+                              "(pump/configs/quick_pump.yaml)")
         where = str(p)
-    problems: list[str] = []  # every problem of the file, reported together
-    unknown = sorted(set(raw) - set(SECTIONS))
-    if unknown:
-        problems.append(f"unknown section(s) {unknown}; valid: {sorted(SECTIONS)}")
-    try:
-        seed = int(raw.get("seed", 0))
-    except (TypeError, ValueError):
-        problems.append(f"seed must be an integer, got {raw.get('seed')!r}")
-        seed = 0
-    cfg: dict[str, Any] = {"name": raw.get("name", "pump"), "device": raw.get("device", "cpu"),
-                           "output": raw.get("output", "results/pump"), "seed": seed,
-                           "design": dict(raw.get("design") or {}), "gravity": raw.get("gravity", [0.0, -9.81, 0.0]),
-                           "notes": raw.get("notes", "")}
-    for sec, defaults in DEFAULTS.items():
-        given = raw.get(sec) or {}
-        if not isinstance(given, dict):
-            problems.append(f"section '{sec}' must be a mapping")
-            given = {}
-        if sec != "contact":  # contact takes any contact-parameter name (checked by the builder)
-            bad = sorted(set(given) - set(defaults))
-            if bad:
-                problems.append(f"unknown key(s) {bad} in '{sec}'; valid: {sorted(defaults)}")
-        cfg[sec] = {**defaults, **given}
-    run = cfg["run"]
-    for k in ("revolutions", "dt", "update_every", "record_every", "vtk_every"):
-        if not (isinstance(run[k], (int, float)) and not isinstance(run[k], bool) and math.isfinite(run[k])
-                and run[k] > 0):
-            problems.append(f"run.{k} must be a finite number > 0, got {run[k]!r}")
-    cp = cfg["coupling"]
-    if not isinstance(cp["two_way"], bool):
-        problems.append(f"coupling.two_way must be true or false, got {cp['two_way']!r}")
-    if isinstance(cp["relaxation"], bool) or not isinstance(cp["relaxation"], (int, float)) \
-            or not (math.isfinite(cp["relaxation"]) and 0 <= cp["relaxation"] <= 100):
-        problems.append(f"coupling.relaxation must be a number in [0, 100] (factor on the flow-through rate "
-                        f"|u0| / voidage_cell; 0: no decay), got {cp['relaxation']!r}")
-    wr = cfg["wear"]
-    for k in ("dnv_K", "dnv_n", "target_density", "archard_k", "hardness", "block_revolutions"):
-        if isinstance(wr[k], bool) or not isinstance(wr[k], (int, float)) or not wr[k] > 0:
-            problems.append(f"wear.{k} must be > 0, got {wr[k]!r}")
-    for k in ("finnie_k", "spin_up_revolutions"):
-        if isinstance(wr[k], bool) or not isinstance(wr[k], (int, float)) or not wr[k] >= 0:
-            problems.append(f"wear.{k} must be >= 0, got {wr[k]!r}")
-    if isinstance(run["worlds"], bool) or not isinstance(run["worlds"], int) or run["worlds"] < 1:
-        problems.append(f"run.worlds must be an integer >= 1, got {run['worlds']!r}")
+    doc = validate_section(PumpFile, raw, where)
+    cfg = doc.model_dump()
+    cfg["design"] = doc.design.model_dump(exclude_unset=True)  # PumpDesign keeps its own defaults
+    cfg["contact"] = {**CONTACT_DEFAULTS, **doc.contact}
+    cfg["gravity"] = list(doc.gravity)
+    problems = []
     try:
         from warpdem.config_io import check_device
 
         check_device(cfg["device"], "device", present=False)  # a GPU config loads anywhere; pump_main runs it
     except ConfigError as exc:
         problems.append(str(exc))
-    if not problems:
-        problems += _step_count_problems(cfg)
-    try:
-        g_ok = np.asarray(cfg["gravity"], dtype=float).shape == (3,)
-    except (TypeError, ValueError):
-        g_ok = False
-    if not g_ok:
-        problems.append(f"gravity must be 3 numbers [m/s^2], got {cfg['gravity']!r}")
-    if len(problems) == 1:
-        raise ConfigError(f"{where}: {problems[0]}")
-    if problems:
-        raise ConfigError(f"{where}: {len(problems)} problems:\n" + "\n".join(f"  - {m}" for m in problems))
+    raise_problems(where, problems + cross_section_problems(cfg))
     return cfg
-
-
-def _step_count_problems(cfg: dict) -> list[str]:
-    """The run's DEM step count against :data:`MAX_STEPS` (none if the design cannot be built: the
-    build reports that)."""
-    try:
-        revolution_time = PumpDesign.from_config(cfg["design"]).revolution_time
-    except (ConfigError, ValueError, TypeError):
-        return []
-    run = cfg["run"]
-    steps = float(run["revolutions"]) * revolution_time / float(run["dt"])
-    if steps <= MAX_STEPS:
-        return []
-    return [f"run: {run['revolutions']:g} revolution(s) of {revolution_time:.3g} s at run.dt = {run['dt']:g} s are "
-            f"{steps:.3g} DEM steps; the limit is {MAX_STEPS:.0e} steps (MAX_STEPS in pump/run.py): raise run.dt "
-            "or run fewer revolutions"]
 
 
 # ----------------------------------------------------------------------------- the case

@@ -20,9 +20,9 @@ def test_configs_load_and_bad_keys_are_named(tmp_path):
     assert q["device"] == "cpu" and p["device"] == "cuda"
     assert p["design"].get("speed_rpm", 1450) == 1450 and p["run"]["revolutions"] == 15
     assert p["run"]["dt"] == pytest.approx(1.15e-6) and p["particles"]["volume_fraction"] == 0.01
-    with pytest.raises(ConfigError, match="unknown section.*'fluids'"):
+    with pytest.raises(ConfigError, match=r"fluids: unknown key; valid: contact, coupling, design"):
         load_config({"fluids": {}})
-    with pytest.raises(ConfigError, match="unknown key.*'spacing'.*'fluid'"):
+    with pytest.raises(ConfigError, match=r"fluid.spacing: unknown key; valid: added_mass"):
         load_config({"fluid": {"spacing": 0.01}})
     with pytest.raises(ConfigError, match="run.dt"):
         load_config({"run": {"dt": -1}})

@@ -15,16 +15,20 @@ such as ``responses[0].replicates``); several problems are listed one per line.
 """
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 import numbers
-from typing import Annotated, Any, Mapping, Sequence, TypeVar, get_args
+import types
+import typing
+from typing import Annotated, Any, Mapping, Optional, Sequence, TypeVar, get_args
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, StrictBool, StrictStr, Tag, ValidationError
+from pydantic import BaseModel, BeforeValidator, ConfigDict, StrictBool, StrictStr, Tag, ValidationError, create_model
 
 from .errors import ConfigError
 
 __all__ = ["Section", "Number", "WholeNumber", "Flag", "Text", "Pair", "yaml_number_hint", "validate_section",
-           "problem_lines", "raise_problems"]
+           "problem_lines", "raise_problems", "dataclass_section"]
 
 
 def yaml_number_hint(value: Any) -> str:
@@ -61,7 +65,7 @@ def _whole_number(value: Any) -> int:
 
 
 def _pair(value: Any) -> Any:
-    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence) or len(value) != 2:
+    if isinstance(value, (str, bytes, Mapping)) or not hasattr(value, "__len__") or len(value) != 2:
         raise ValueError("must be [low, high] (two numbers)")
     return tuple(value)
 
@@ -86,6 +90,36 @@ class Section(BaseModel):
 
 M = TypeVar("M", bound=BaseModel)
 
+_SCALARS = {float: Number, int: WholeNumber, bool: Flag, str: Text}
+
+
+def _strict_type(annotation: Any) -> Any:
+    """The strict schema type of a dataclass field's annotation: ``float`` -> :data:`Number`,
+    ``int`` -> :data:`WholeNumber`, ``bool`` -> :data:`Flag`, ``str`` -> :data:`Text`,
+    ``tuple[float, float]`` -> :data:`Pair`, ``dict[str, float]``, each optional where the field
+    is ``X | None``; Any for what the dataclass checks itself (objects, mappings of objects)."""
+    if annotation in _SCALARS:
+        return _SCALARS[annotation]
+    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
+    if origin in (typing.Union, types.UnionType) and type(None) in args and len(args) == 2:
+        inner = _strict_type(next(a for a in args if a is not type(None)))
+        return Any if inner is Any else Optional[inner]
+    if origin is tuple and args == (float, float):
+        return Pair
+    if origin is dict and args == (str, float):
+        return dict[Text, Number]
+    return Any
+
+
+@functools.cache
+def dataclass_section(cls: type, exclude: tuple[str, ...] = ()) -> type[Section]:
+    """A :class:`Section` with one field per field of the dataclass ``cls`` (less ``exclude``),
+    typed by :func:`_strict_type`; every field optional (only the keys given are checked, the
+    dataclass keeps its defaults), any other key refused."""
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: (_strict_type(hints[f.name]), None) for f in dataclasses.fields(cls) if f.name not in exclude}
+    return create_model(f"{cls.__name__}Section", __base__=Section, **fields)
+
 _COMPARISONS = {"greater_than": ("gt", ">"), "greater_than_equal": ("ge", ">="), "less_than": ("lt", "<"),
                 "less_than_equal": ("le", "<=")}
 _TYPES = {"int_type": "a whole number", "int_parsing": "a whole number", "int_from_float": "a whole number",
@@ -101,7 +135,7 @@ def _path(loc: Sequence[Any]) -> str:
     for part in loc:
         if isinstance(part, int):
             out += f"[{part}]"
-        elif isinstance(part, str) and part.startswith("("):
+        elif isinstance(part, str) and (part.startswith("(") or part == "[key]"):  # a union tag, a mapping's key
             continue
         else:
             out += f".{part}" if out else str(part)

@@ -13,44 +13,20 @@ that hold objects (material, contact law, wall material, plugins) are checked by
 """
 from __future__ import annotations
 
-import dataclasses
-import functools
-import types
-import typing
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping
 
-from pydantic import ValidationError, create_model
+from pydantic import ValidationError
 
 from warpdem import ConfigError
-from warpdem.config_schema import Flag, Number, Pair, Section, Text, WholeNumber, problem_lines
+from warpdem.config_schema import Section, dataclass_section, problem_lines
 
 __all__ = ["settings_model", "check_setting_types"]
 
-_SCALARS = {float: Number, int: WholeNumber, bool: Flag, str: Text}
 
-
-def _strict_type(annotation: Any) -> Any:
-    """The strict schema type of a dataclass field's annotation (Any where the experiment checks it)."""
-    if annotation in _SCALARS:
-        return _SCALARS[annotation]
-    origin, args = typing.get_origin(annotation), typing.get_args(annotation)
-    if origin in (typing.Union, types.UnionType) and type(None) in args and len(args) == 2:
-        inner = _strict_type(next(a for a in args if a is not type(None)))
-        return Any if inner is Any else Optional[inner]
-    if origin is tuple and args == (float, float):
-        return Pair
-    if origin is dict and args == (str, float):
-        return dict[Text, Number]
-    return Any
-
-
-@functools.cache
 def settings_model(experiment: type) -> type[Section]:
     """A :class:`~warpdem.config_schema.Section` with one field per setting of ``experiment``
     (a dataclass; ``scale`` left out), every field optional (only given settings are checked)."""
-    hints = typing.get_type_hints(experiment)
-    fields = {f.name: (_strict_type(hints[f.name]), None) for f in dataclasses.fields(experiment) if f.name != "scale"}
-    return create_model(f"{experiment.__name__}Settings", __base__=Section, **fields)
+    return dataclass_section(experiment, ("scale",))
 
 
 def check_setting_types(experiment: type, settings: Mapping[str, Any], name: str | None = None) -> dict[str, Any]:
