@@ -585,6 +585,9 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
             versions[0] = base = rnd.current
             history = ErrorHistory((_errors(base, settings),))
         top = rnd.top
+        _say("ranking on top of the " + current.name + ": " + "; ".join(
+            f"{c.effect.words} ln B {c.log_bayes:+.1f} (DEM largest |z| {np.nanmax(np.abs(_residual(c.study))):.1f})"
+            for c in rnd.candidates) + (f"; tied: {', '.join(rnd.tied)}" if len(rnd.tied) >= 2 else ""))
         if forced:
             chosen, reason = forced.pop(0), "added as requested (settings.add)"
         elif not needs_effect:
@@ -622,6 +625,10 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         recal = done[0]
         versions.append(recal)
         history = history.appended(_errors(recal, settings))
+        before, after = history.versions[-2], history.versions[-1]
+        _say(f"{recal.name}: error (DEM) fell from chi2/observable {before.chi2_per_observable:.2f} to "
+             f"{after.chi2_per_observable:.2f}, largest |z| {before.max_abs_z:.1f} -> {after.max_abs_z:.1f}; "
+             f"{after.n_within} of {after.n_observables} within {settings.within_sigma:g} sigma")
         remaining = [c for c in remaining if c.name != chosen]
     if up_front["on"]:
         _designs_used(up_front, ["base"] + ([c.name for c in cands] if rounds else []))
