@@ -14,6 +14,7 @@ from ..filling import Box, level
 from ..materials import BulkMaterial
 from ..measurement import baffle_static_angle, bulk_density, mean_surface_height
 from .common import Experiment, RunContext, fit_to_dict, rectangle
+from .lab_effort import LabEffort, LabSetting
 
 __all__ = ["BaffleBox"]
 
@@ -52,6 +53,18 @@ class BaffleBox(Experiment):
         "quick": {"material": QUICK_MATERIAL, "fill_mass": 28.0, "lift_speed": 0.2, "lift_to": 0.30, "max_time_after_lift": 4.0,
                   "bin_width": 0.025},
     }
+    #: lab hours per repeat and settings a lab can change (calibration.experiments.lab_effort)
+    LAB_EFFORT: ClassVar[LabEffort] = LabEffort(
+        0.5, 4.0, "a repeat: weigh, fill and level, lift, photograph, sweep up; set-up: a box with a lifting baffle")
+    LAB_SETTINGS: ClassVar[tuple[LabSetting, ...]] = (
+        LabSetting("fill_mass", "fill mass", "kg", (0.5, 1.5), 0.1, 0.5,
+                   "weigh another fill; cohesion weighs more against gravity in a lower heap"),
+        LabSetting("lift_speed", "baffle lift speed", "m/s", (2.0, 0.5), 0.25, 0.5,
+                   "set the drive to another speed; a faster lift lets the heap flow before it stops"),
+        LabSetting("box_width", "box width", "m", (1.5,), 4.0, 0.5,
+                   "a new box; the side walls hold less of a heap of the same height (fill mass and measured slab "
+                   "scale with the width)", also_scaled=("measure_y", "fill_mass")),
+    )
 
     box_length: float = 0.300
     box_width: float = 0.200

@@ -15,6 +15,7 @@ from ..filling import VerticalCylinder, body_tops, level
 from ..materials import BulkMaterial
 from ..measurement import CylinderPileResult, cylinder_pile_angle
 from .common import Experiment, RunContext, fit_to_dict, rectangle
+from .lab_effort import LabEffort, LabSetting
 
 __all__ = ["HollowCylinder"]
 
@@ -58,6 +59,17 @@ class HollowCylinder(Experiment):
         "quick": {"material": QUICK_CYLINDER_MATERIAL, "diameter": 0.150, "fill_mass": 5.0, "lift_speed": 0.1,
                   "max_time_after_lift": 3.0, "bin_width": 0.020},
     }
+    #: lab hours per repeat and settings a lab can change (calibration.experiments.lab_effort)
+    LAB_EFFORT: ClassVar[LabEffort] = LabEffort(
+        0.4, 2.0, "a repeat: weigh, fill, lift, scan four profiles, sweep up; set-up: a tube, a plate and a lift")
+    LAB_SETTINGS: ClassVar[tuple[LabSetting, ...]] = (
+        LabSetting("fill_mass", "fill mass", "kg", (0.5, 2.0), 0.1, 0.4,
+                   "weigh another fill; a small pile may not form at all, a large one is taller and steeper"),
+        LabSetting("lift_speed", "cylinder lift speed", "m/s", (2.0, 0.5), 0.25, 0.4,
+                   "set the lift to another speed; a fast lift spreads the material further"),
+        LabSetting("diameter", "cylinder diameter", "m", (1.5, 0.75), 4.0, 0.4,
+                   "cut a new tube (expensive); the column then spreads from a wider base"),
+    )
 
     diameter: float = 0.200
     height: float = 0.500

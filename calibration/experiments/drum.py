@@ -18,6 +18,7 @@ from ..materials import BulkMaterial
 from ..measurement import drum_dynamic_angle, revolution_snapshot_times
 from .baffle import QUICK_MATERIAL
 from .common import Experiment, ExperimentResult, RunContext, fit_to_dict, normalize_parameter_sets
+from .lab_effort import LabEffort, LabSetting
 
 __all__ = ["RotatingDrum", "drum_mesh"]
 
@@ -83,6 +84,17 @@ class RotatingDrum(Experiment):
         "quick": {"material": QUICK_MATERIAL, "discard": 1, "record": 2, "bin_width": 0.020,
                   "frames_per_revolution": 9, "max_skipped_snapshots": 2},
     }
+    #: lab hours per repeat and settings a lab can change (calibration.experiments.lab_effort)
+    LAB_EFFORT: ClassVar[LabEffort] = LabEffort(
+        0.5, 8.0, "a repeat: fill, settle, 15 revolutions filmed, empty; set-up: a drum with a clear end wall and a motor")
+    LAB_SETTINGS: ClassVar[tuple[LabSetting, ...]] = (
+        LabSetting("rpm", "drum speed", "rpm", (2.0, 1 / 3), 0.0, 0.1,
+                   "a speed change on a filled drum costs minutes; cohesion and shape act unequally on slow and fast flow"),
+        LabSetting("fill_fraction", "fill fraction", "-", (0.625, 1.5), 0.1, 0.5,
+                   "weigh another fill; a shallower bed flows over fewer particle layers"),
+        LabSetting("diameter", "drum diameter", "m", (1.5, 0.75), 8.0, 0.5,
+                   "a new drum is a day's work; it changes the bed depth against the particle size"),
+    )
 
     diameter: float = 0.300
     length: float = 0.150
