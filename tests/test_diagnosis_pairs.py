@@ -80,3 +80,22 @@ def test_an_effect_outside_the_candidates_is_called_so(outside, tmp_path):
     assert doc["verdict"]["none_of_candidates"] and doc["verdict"]["unreached"][0]["key"] in KEYS
     html = paths["report"].read_text(encoding="utf-8")
     assert "no candidate reaches" in html.lower()
+
+
+def test_a_choice_short_of_strong_evidence_is_provisional_and_names_what_would_decide():
+    """Every candidate within ``strong_log_bayes`` of the top (here made huge) is a contender: the
+    choice stands, provisionally, and the proposals are forecast under the contenders."""
+    from tests.test_diagnosis_logic import DRUM_10, DRUM_60
+
+    obs = lab_observables({"mu_s_pp": 0.45, "mu_s_pw": 0.5, "mu_r": 0.12}, ("rolling_resistance",))
+    model = AnalyticGranularModel(1, proposals=(DRUM_10, DRUM_60))
+    r = diagnose(obs, BASE, [ROLLING, COHESION, SHAPE], model,
+                 DiagnosisSettings(**{**FAST.to_dict(), "strong_log_bayes": 1e6}))
+    rnd = r.rounds[0]
+    assert rnd.chosen == "rolling_resistance" and len(rnd.tied) == 1
+    assert set(rnd.contenders) == {"rolling_resistance", "cohesion", "shape"} == set(rnd.discriminated)
+    assert rnd.discrimination is not None and set(rnd.discrimination.candidates) == set(rnd.contenders)
+    assert "provisional" in r.headline and "fits nearly as well" in r.headline
+    # the default (ln B 3) leaves a clear winner alone: no forecasts
+    plain = diagnose(obs, BASE, [ROLLING, COHESION, SHAPE], AnalyticGranularModel(1, proposals=(DRUM_10, DRUM_60)), FAST)
+    assert plain.rounds[0].contenders == () and plain.rounds[0].discrimination is None

@@ -78,6 +78,7 @@ class DiagnosisSection(_Strict):
     within_sigma: float = Field(2.0, gt=0)
     tie_log_bayes: float = Field(math.log(3.0), gt=0)
     separation_sigma: float = Field(2.0, gt=0)
+    strong_log_bayes: float = Field(3.0, gt=0)
     max_added_effects: int = Field(2, ge=0)
     rank_when_adequate: bool = False
     model_discrepancy: Union[Literal["fidelity", "none"], dict[str, NonNegativeFloat]] = "fidelity"

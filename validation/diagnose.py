@@ -129,14 +129,22 @@ class RankingRound:
     discrimination: Discrimination | None
     chosen: str | None
     reason: str
+    contenders: tuple[str, ...] = ()
 
     @property
     def top(self) -> CandidateResult:
         return self.candidates[0]
 
+    @property
+    def discriminated(self) -> tuple[str, ...]:
+        """The candidates whose forecasts the discrimination compares: the tied ones, or, when the chosen
+        effect won by less than ``strong_log_bayes``, the contenders within that margin (one name: none)."""
+        return self.tied if len(self.tied) >= 2 else self.contenders if len(self.contenders) >= 2 else ()
+
     def to_dict(self) -> dict[str, Any]:
         return {"current_version": self.current.name, "candidates": [c.to_dict() for c in self.candidates],
-                "tied": list(self.tied), "discrimination": None if self.discrimination is None
+                "tied": list(self.tied), "contenders": list(self.contenders),
+                "discrimination": None if self.discrimination is None
                 else self.discrimination.to_dict(), "chosen": self.chosen, "reason": self.reason}
 
 
@@ -426,15 +434,19 @@ def _rank_round(current: ModelStudy, candidates: Sequence[CandidateEffect], obs:
                  if top.log_evidence - c.log_evidence
                  < max(settings.tie_log_bayes,
                        2.0 * math.hypot(top.study.evidence.standard_error, c.study.evidence.standard_error)))
-    return RankingRound(current, ranked, tied, None, None, "")
+    # short of "strong" evidence (Kass & Raftery 1995): the choice stands, provisionally, and the
+    # discrimination names what would decide
+    contenders = tuple(c.name for c in ranked if top.log_evidence - c.log_evidence < settings.strong_log_bayes)
+    return RankingRound(current, ranked, tied, None, None, "", contenders if len(contenders) >= 2 else ())
 
 
 def _discriminate_tie(rnd: RankingRound, model: ForwardModel, runner: ForwardRunner, settings: DiagnosisSettings,
                       seed: int) -> Discrimination:
-    """The forecasts of the tied candidates of ``rnd`` at the proposed conditions
-    (:func:`validation.discrimination.discriminate`)."""
+    """The forecasts of the tied (or contending) candidates of ``rnd`` at the proposed conditions
+    (:func:`validation.discrimination.discriminate`; :attr:`RankingRound.discriminated`)."""
     by_name = {c.name: c for c in rnd.candidates}
-    return discriminate({n: by_name[n].study for n in rnd.tied}, {n: by_name[n].effect.words for n in rnd.tied},
+    names = rnd.discriminated
+    return discriminate({n: by_name[n].study for n in names}, {n: by_name[n].effect.words for n in names},
                         tuple(model.proposals()), runner, settings.replicates, settings.separation_sigma,
                         seed=seed, replicated_fraction=settings.replicated_fraction)
 
@@ -588,6 +600,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         _say("ranking on top of the " + current.name + ": " + "; ".join(
             f"{c.effect.words} ln B {c.log_bayes:+.1f} (DEM largest |z| {np.nanmax(np.abs(_residual(c.study))):.1f})"
             for c in rnd.candidates) + (f"; tied: {', '.join(rnd.tied)}" if len(rnd.tied) >= 2 else ""))
+        forced_pick = bool(forced)
         if forced:
             chosen, reason = forced.pop(0), "added as requested (settings.add)"
         elif not needs_effect:
@@ -608,7 +621,10 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
         # the tie's forecasts and the chosen effect's recalibration do not depend on each other: with a
         # pooled forward model their DEM worlds share launches; otherwise the forecasts run first
         jobs: list[Callable[[], Any]] = []
-        if len(rnd.tied) >= 2:
+        compare = len(rnd.discriminated) >= 2 and (len(rnd.tied) >= 2 or (chosen is not None and not forced_pick))
+        if compare:
+            _say(f"forecasting the proposed measurements under {', '.join(rnd.discriminated)} "
+                 f"({'tied' if len(rnd.tied) >= 2 else f'within ln B {settings.strong_log_bayes:g} of the top'})")
             jobs.append(_timed(seconds, "ranking", lambda rnd=rnd, step=step: _discriminate_tie(
                 rnd, forward_model, runner, settings, _round_seed(settings, step))))
         if chosen is not None:
@@ -617,8 +633,8 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
             jobs.append(_timed(seconds, "recalibration", lambda pick=pick, step=step: refine_study(
                 pick.study, obs, runner, settings, settings.seed + 1000 * (step + 1) + 500, base_noise, say=_say)))
         done = run_as_workers(runner.model, jobs)
-        disc = done.pop(0) if len(rnd.tied) >= 2 else None
-        rnd = RankingRound(rnd.current, rnd.candidates, rnd.tied, disc, chosen, reason)
+        disc = done.pop(0) if compare else None
+        rnd = RankingRound(rnd.current, rnd.candidates, rnd.tied, disc, chosen, reason, rnd.contenders)
         rounds.append(rnd)
         if chosen is None:
             break
@@ -823,9 +839,13 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
             d = tied_round.discrimination
             words = {c.name: c.effect.words for c in tied_round.candidates}
             others = " and ".join(words[n] for n in d.candidates if n != tied_round.chosen)
-            headline += (f"; provisional: {others} fits as well"
-                         + (f" -- measure the {d.forecasts[0].proposal.name} to decide" if d.recommended
-                            else " and no proposed measurement separates them"))
+            how = ("fits as well" if len(tied_round.tied) >= 2 else
+                   f"fits nearly as well (evidence short of strong: ln B margin below {settings.strong_log_bayes:g})")
+            pick = next((f for f in d.forecasts if f.proposal.key == d.recommended), None)
+            headline += (f"; provisional: {others} {how}"
+                         + (f" -- measure the {pick.proposal.name} to decide" if pick is not None
+                            else " and none of the proposed measurements separates them: these effects are "
+                                 "indistinguishable with these experiments"))
         steps.append(f"Enable {added} in the model configuration (add: {list(final.version.effect_names)}) with the "
                      "recalibrated parameters: " + ", ".join(f"{k} = {v:.3g}" for k, v in final.best_parameters.items())
                      + ".")
@@ -839,18 +859,23 @@ def _summarise(versions: list[ModelStudy], rounds: list[RankingRound], history: 
         if r.discrimination is not None:
             details.append(r.discrimination.sentence)
             d = r.discrimination
-            if d.recommended is not None:
-                f = d.forecasts[0]
             words = {c.name: c.effect.words for c in r.candidates}
-            if d.recommended is not None:
-                f = d.forecasts[0]
+            f = next((f for f in d.forecasts if f.proposal.key == d.recommended), None)
+            if f is not None:
                 steps.insert(0, f"Measure the {f.proposal.name} ({f.proposal.n_repeats} repeats): "
                              + "; ".join(f"{words[n]} predicts {f.means[n]:.3g} ± {f.sds[n]:.2g} {f.proposal.unit}"
                                          for n in d.candidates) + f" (separation {f.separation:.1f} sigma).")
             else:
-                steps.insert(0, "The present and proposed measurements cannot separate "
-                             f"{' and '.join(words[n] for n in d.candidates)}: look for an experiment where they act "
-                             "differently (faster or looser flow, a free pile).")
+                closest = "; ".join(
+                    f"at the {g.proposal.name}: " + ", ".join(f"{words[n]} {g.means[n]:.3g} ± {g.sds[n]:.2g}"
+                                                              for n in d.candidates) + f" {g.proposal.unit}"
+                    for g in sorted(d.forecasts, key=lambda g: -g.separation)[:2])
+                steps.insert(0, f"These effects are indistinguishable with these experiments: neither the present "
+                             f"nor the {len(d.forecasts)} proposed measurements separate "
+                             f"{' and '.join(words[n] for n in d.candidates)}"
+                             + (f" (closest: {closest})" if closest else "")
+                             + "; look for an experiment where they act differently (faster or looser flow, a free "
+                               "pile, a smaller scale where cohesion weighs more).")
         if r.chosen is not None:
             details.append(f"Chosen: {r.reason}.")
     details.extend(filter(None, (own_noise_sentence(v, base) for v in versions[1:])))

@@ -41,6 +41,9 @@ class DiagnosisSettings:
     tie_log_bayes : top candidates whose ln Z differ by less than this are tied and need a new
         measurement (ln 3: Kass & Raftery's "not worth more than a bare mention", B < 3); an
         effect is only added when its ln B over the current model exceeds it.
+    strong_log_bayes : an effect chosen by a margin in ln B below this over the runner-up (short of
+        Kass & Raftery's "strong", 2 ln B > 6) is provisional: the proposed measurements are forecast
+        under the contenders within that margin and the one that would decide is named.
     separation_sigma : a proposed measurement separates two tied candidates when their predicted
         outcomes differ by at least this many combined sds (2).
     max_added_effects : how many effects may be added in turn (base, base+A, base+A+B, ...). A
@@ -92,6 +95,7 @@ class DiagnosisSettings:
     within_sigma: float = 2.0
     tie_log_bayes: float = math.log(3.0)
     separation_sigma: float = 2.0
+    strong_log_bayes: float = 3.0
     max_added_effects: int = 2
     add: tuple[str, ...] = ()
     rank_when_adequate: bool = False
@@ -118,7 +122,7 @@ class DiagnosisSettings:
         _int("gp_restarts", self.gp_restarts, 0)
         _int("cv_folds", self.cv_folds, 2)
         _int("seed", self.seed, 0)
-        for name in ("cutoff", "within_sigma", "tie_log_bayes", "separation_sigma"):
+        for name in ("cutoff", "within_sigma", "tie_log_bayes", "separation_sigma", "strong_log_bayes"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"DiagnosisSettings.{name} must be a positive number, got {v!r}")
