@@ -94,6 +94,8 @@ class DEMForwardModel(ForwardModel):
             so a launch cut short (a time-limited GPU call, Ctrl-C) continues where it stopped when
             the same request comes again (the cache has not grown, so the launch draws the same
             fills and matches its checkpoint); None, or no cache: no checkpoints.
+        proposals_not_forecast: one line per condition the proposal search reached but left out
+            (:meth:`validation.proposals.ProposalPlan.not_forecast`), for the discrimination to name.
     """
 
     def __init__(self, base: ModelDescription, base_material: BulkMaterial | None, effects: Sequence[DEMEffect],
@@ -103,7 +105,7 @@ class DEMForwardModel(ForwardModel):
                  processes: int | str | None = "auto", cache: str | Path | None = None,
                  progress: bool = False, proposals: Sequence[ProposedMeasurement] = (),
                  superset: bool | str = "auto", checkpoint_every_s: float | None = 120.0,
-                 executor: Any = None) -> None:
+                 executor: Any = None, proposals_not_forecast: Sequence[str] = ()) -> None:
         self.base = base
         self.base_material = base_material
         self.effects = {e.name: e for e in effects}
@@ -123,6 +125,7 @@ class DEMForwardModel(ForwardModel):
         self.executor = executor
         self.progress = progress
         self._proposals = tuple(proposals)
+        self.proposals_not_forecast = tuple(proposals_not_forecast)
         self.cache_path = Path(cache) if cache is not None else None
         self.checkpoints = None if self.cache_path is None or checkpoint_every_s is None else BatchCheckpoints(
             self.cache_path.parent / f"{self.cache_path.stem}_checkpoints", float(checkpoint_every_s))
@@ -221,6 +224,8 @@ class DEMForwardModel(ForwardModel):
             self.observables[key] = spec
         names = {p.key for p in self._proposals}
         self._proposals += tuple(p for p in other.proposals() if p.key not in names)
+        self.proposals_not_forecast += tuple(d for d in other.proposals_not_forecast
+                                             if d not in self.proposals_not_forecast)
 
     def check_experiments(self) -> None:
         """Build the experiment of every observable's condition once, without running it: a setting

@@ -46,6 +46,8 @@ class ProposedMeasurement:
 
     expected_standard_error : the standard error (``unit``) the lab expects for a mean of
         ``n_repeats``; None: estimated from the DEM fill-to-fill spread as ``s_DEM / sqrt(n_repeats)``.
+    lab_hours : lab effort [h] of the ``n_repeats`` repeats, any change of set-up included
+        (:mod:`validation.proposals`); None: not known (ranked as one hour).
     """
 
     key: str
@@ -56,6 +58,7 @@ class ProposedMeasurement:
     label: str = ""
     expected_standard_error: float | None = None
     n_repeats: int = 3
+    lab_hours: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("key", "experiment", "quantity", "unit"):
@@ -69,6 +72,11 @@ class ProposedMeasurement:
                 raise ValueError(f"proposed measurement {self.key!r}: expected_standard_error must be >= 0, got {se}")
         if isinstance(self.n_repeats, bool) or not isinstance(self.n_repeats, (int, np.integer)) or self.n_repeats < 1:
             raise ValueError(f"proposed measurement {self.key!r}: n_repeats must be an integer >= 1, got {self.n_repeats!r}")
+        if self.lab_hours is not None:
+            h = float(self.lab_hours)
+            if not (math.isfinite(h) and h > 0):
+                raise ValueError(f"proposed measurement {self.key!r}: lab_hours must be > 0, got {self.lab_hours!r}")
+            object.__setattr__(self, "lab_hours", h)
 
     @property
     def name(self) -> str:
@@ -77,7 +85,8 @@ class ProposedMeasurement:
     def to_dict(self) -> dict[str, Any]:
         return {"key": self.key, "experiment": self.experiment, "quantity": self.quantity, "unit": self.unit,
                 "condition": dict(self.condition), "label": self.label,
-                "expected_standard_error": self.expected_standard_error, "n_repeats": self.n_repeats}
+                "expected_standard_error": self.expected_standard_error, "n_repeats": self.n_repeats,
+                "lab_hours": self.lab_hours}
 
 
 class ForwardModel(ABC):
