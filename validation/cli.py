@@ -47,39 +47,52 @@ def _preset_material(cfg):
     return make_experiment("baffle", cfg.scale).bulk_material()
 
 
-def _proposals(cfg, observables) -> list:
-    """Conditions worth forecasting when candidates tie: the config's list, or (auto) the drum at
-    speeds not measured, and A's bulk density / C's pile height when they were not measured."""
-    from calibration.experiments import EXPERIMENTS
+def _proposals(cfg, observables, material=None):
+    """Conditions worth forecasting when candidates tie, as a :class:`validation.proposals.ProposalPlan`:
+    the config's list (each one's lab effort from the experiments' tables unless it gives
+    ``lab_hours``), or (auto) every setting a lab can change and every observable, at most
+    ``max_proposed_conditions`` new conditions (:func:`validation.proposals.enumerate_proposals`).
+    ``material``: the material the DEM will run (None: the presets'), to refuse a fill too large."""
+    from calibration.experiments import EXPERIMENTS, make_experiment
 
+    from .dem_forward import condition_settings
     from .forward import ProposedMeasurement
+    from .proposals import ProposalPlan, enumerate_proposals, lab_hours
+
+    def experiment_at(exp: str, settings) -> None:
+        """Build (not run) ``exp`` at ``settings`` as the DEM will: a ConfigError says why it cannot run."""
+        extra = dict(cfg.experiments.get(exp, {}))
+        scale = extra.pop("scale", cfg.scale)
+        kw = {**extra, **settings}
+        if material is not None:
+            kw["material"] = material
+        make_experiment(exp, scale, **kw).check_size()
 
     if cfg.proposals == "none":
-        return []
+        return ProposalPlan((), (), (), cfg.max_proposed_conditions)
+    if cfg.proposals == "auto":
+        return enumerate_proposals(observables, cfg.scale, cfg.experiments, cfg.max_proposed_conditions,
+                                   check=experiment_at)
     out = []
-    if cfg.proposals != "auto":
-        for i, p in enumerate(cfg.proposals):
-            if p.experiment not in EXPERIMENTS or p.quantity not in EXPERIMENTS[p.experiment].OBSERVABLES:
-                raise ConfigError(f"proposals[{i}]: unknown experiment/quantity {p.experiment}/{p.quantity}")
-            key = f"{p.experiment}/proposed{i}/{p.quantity}"
-            out.append(ProposedMeasurement(key, p.experiment, p.quantity, EXPERIMENTS[p.experiment].OBSERVABLES[p.quantity],
-                                           p.settings, p.label or key, p.expected_standard_error, p.n_repeats))
-        return out
-    measured = {(o.experiment, o.quantity) for o in observables}
-    drum = [o for o in observables if o.experiment == "drum" and o.quantity == "dynamic_angle"]
-    if drum:
-        speeds = {float(o.condition.get("rpm", 0)) for o in drum}
-        other = {k: v for k, v in drum[0].condition.items() if k != "rpm"}
-        for rpm in (5.0, 60.0):
-            if rpm not in speeds:
-                out.append(ProposedMeasurement(f"drum/{rpm:g}rpm/dynamic_angle", "drum", "dynamic_angle", "deg",
-                                               {**other, "rpm": rpm}, f"drum angle at {rpm:g} rpm"))
-    for exp, qty, unit, words in (("baffle", "bulk_density", "kg/m^3", "bulk density of the box fill"),
-                                  ("cylinder", "pile_height", "m", "pile height after the cylinder lift")):
-        base = [o for o in observables if o.experiment == exp]
-        if base and (exp, qty) not in measured:
-            out.append(ProposedMeasurement(f"{exp}/{qty}", exp, qty, unit, dict(base[0].condition), words))
-    return out
+    for i, p in enumerate(cfg.proposals):
+        if p.experiment not in EXPERIMENTS:
+            raise ConfigError(f"proposals[{i}]: unknown experiment {p.experiment!r}; valid: {sorted(EXPERIMENTS)}")
+        units = EXPERIMENTS[p.experiment].OBSERVABLES
+        if p.quantity not in units:
+            raise ConfigError(f"proposals[{i}]: the {p.experiment} experiment does not report {p.quantity!r}; "
+                              f"it reports {list(units)}")
+        try:
+            settings = condition_settings(p.experiment, dict(p.settings))
+            experiment_at(p.experiment, settings)
+        except ConfigError as exc:
+            raise ConfigError(f"proposals[{i}].settings: {exc}") from None
+        measured = [dict(o.condition) for o in observables if o.experiment == p.experiment]
+        hours = p.lab_hours if p.lab_hours is not None else lab_hours(
+            p.experiment, settings, measured, p.n_repeats, cfg.scale, cfg.experiments.get(p.experiment, {}))
+        key = f"{p.experiment}/proposed{i}/{p.quantity}"
+        out.append(ProposedMeasurement(key, p.experiment, p.quantity, units[p.quantity], settings, p.label or key,
+                                       p.expected_standard_error, p.n_repeats, lab_hours=hours))
+    return ProposalPlan(tuple(out), (), (), cfg.max_proposed_conditions)
 
 
 def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path | None = None,
@@ -144,7 +157,8 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
         except ConfigError as exc:
             raise ConfigError(f"measurements: {mpath}: experiments.{o.experiment}: {exc}") from None
         specs.append(ObservableSpec(o.key, o.experiment, o.quantity, settings))
-    proposals = _proposals(cfg, list(observations))
+    plan = _proposals(cfg, list(observations), material)
+    proposals = list(plan.proposals)
     specs += [ObservableSpec(p.key, p.experiment, p.quantity, condition_settings(p.experiment, dict(p.condition)))
               for p in proposals]
     # measurements and cache are relative to the config's folder; the output folder (as in
@@ -161,7 +175,8 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
                                     procs, "executor")
     forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
                               fixed=fixed, device=device or cfg.device, processes=procs, cache=cache,
-                              progress=False, proposals=proposals, executor=executor)
+                              progress=False, proposals=proposals, executor=executor,
+                              proposals_not_forecast=plan.not_forecast())
     try:  # every condition's experiment is built now (settings, fill size), not when its DEM starts
         forward.check_experiments()
     except ConfigError as exc:

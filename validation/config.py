@@ -23,7 +23,10 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
     candidates: default               # or a list: [rolling_resistance, cohesion, shape, rolling:cdt]
     effect_ranges: {mu_r_pp: [0, 0.3]}    # design range of an effect parameter (default: declared)
     add: []                           # effects to add whatever the ranking (--add EFFECT)
-    proposals: auto                   # conditions to forecast when candidates tie, or a list
+    proposals: auto                   # conditions to forecast when candidates tie, or a list of
+                                      # {experiment, quantity, settings, label, n_repeats,
+                                      #  expected_standard_error, lab_hours} (docs/diagnosis.md)
+    max_proposed_conditions: 6        # with auto: new conditions forecast at most (validation.proposals)
     diagnosis: {replicates: 2}        # validation.settings.DiagnosisSettings fields, e.g.
                                       # model_discrepancy: fidelity (none | {KEY: sd}): model error
                                       # designs_up_front: auto (true | false): every design in one call
@@ -61,6 +64,7 @@ class ProposalSection(_Strict):
     label: str = ""
     n_repeats: int = Field(3, ge=1)
     expected_standard_error: float | None = Field(None, ge=0)
+    lab_hours: float | None = Field(None, gt=0)  # None: from the experiment's LAB_SETTINGS / LAB_EFFORT
 
 
 class DiagnosisSection(_Strict):
@@ -116,6 +120,7 @@ class DiagnosisConfig(_Strict):
     effect_ranges: dict[str, tuple[float, float]] = Field(default_factory=dict)
     add: list[str] = Field(default_factory=list)
     proposals: Union[Literal["auto", "none"], list[ProposalSection]] = "auto"
+    max_proposed_conditions: int = Field(6, ge=0)
     diagnosis: DiagnosisSection = Field(default_factory=DiagnosisSection)
     cache: str | None = None
     progress: bool = True
