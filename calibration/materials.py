@@ -379,6 +379,21 @@ class BulkMaterial:
         return float(sum(f * t.mass for t, f in self.clumps))
 
     @property
+    def smallest_sphere(self) -> tuple[float, float]:
+        """(radius [m], mass [kg]) of the smallest sphere any fill of this material can hold: the
+        size distribution's lower end (spheres), the smallest member of any template (clumps, with
+        the body's mass split by member volume as the engine does). What the time step follows."""
+        if self.is_spheres:
+            r = 0.5 * self.diameter[0]
+            return r, self.particle.density * 4.0 / 3.0 * math.pi * r ** 3
+        best = (math.inf, math.inf)
+        for t, _ in self.clumps:
+            radii = np.asarray(t.radii, float)
+            masses = t.mass * radii ** 3 / np.sum(radii ** 3)
+            best = (min(best[0], float(radii.min())), min(best[1], float(masses.min())))
+        return best
+
+    @property
     def max_bounding_radius(self) -> float:
         """Largest particle's enclosing radius [m]."""
         if self.is_spheres:

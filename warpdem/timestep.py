@@ -61,16 +61,23 @@ def time_step_limits(model, v_ref: float = 2.0) -> TimeStepLimits:
     mats = model.materials
     smat = model.host["sphere_material"]
     mass = model.sphere_mass()
+    smallest = []
+    for mi in np.unique(smat):
+        sel = smat == mi
+        smallest.append((mats[int(mi)], float(r[sel].min()), float(mass[sel].min())))
+    return time_step_limits_for(smallest, v_ref)
+
+
+def time_step_limits_for(smallest: "list[tuple[object, float, float]]", v_ref: float = 2.0) -> TimeStepLimits:
+    """Stability limits from (material, smallest sphere radius [m], smallest sphere mass [kg]) per
+    sphere material: T_R of the smallest sphere, t_c of an impact of two of the lightest at ``v_ref``.
+    A caller that knows the smallest sphere a material can have (its size distribution's lower end)
+    gets a step that does not depend on which particles one fill happened to draw."""
     t_r = math.inf
     t_c = math.inf
-    for mi in np.unique(smat):
-        m = mats[int(mi)]
-        sel = smat == mi
-        rmin = float(r[sel].min())
+    for m, rmin, mmin in smallest:
         t_r = min(t_r, rayleigh_time(rmin, m.density, m.shear_modulus, m.poisson_ratio))
-        e_eff = effective_youngs_modulus(m, m)
-        mmin = float(mass[sel].min())
-        t_c = min(t_c, hertz_contact_time(mmin / 2, rmin / 2, e_eff, v_ref))
+        t_c = min(t_c, hertz_contact_time(mmin / 2, rmin / 2, effective_youngs_modulus(m, m), v_ref))
     limit = min(t_r, t_c / MIN_STEPS_PER_CONTACT)
     return TimeStepLimits(t_r, t_c, limit, min(0.2 * t_r, limit), v_ref)
 

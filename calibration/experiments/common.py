@@ -178,7 +178,8 @@ class Experiment:
         processes load them again).
     contact_defaults: parameters applied to every world before its own set (spec "Default
         material": restitution 0.6 for all pairs).
-    dt: time step [s] (None: ``warpdem.time_step_limits(model).recommended``);
+    dt: time step [s] (None: the recommended step of the material's smallest possible sphere,
+        ``warpdem.time_step_limits_for``, the same for every batch);
         dt_rayleigh_fraction: the step as a fraction of the smallest sphere's Rayleigh time
         (capped by the stability limit; for time-step convergence studies); v_ref: impact
         speed of the stability check [m/s]; force_dt: accept dt above the limit.
@@ -484,7 +485,10 @@ class Experiment:
                 builder.set_contact_parameters(world=w, **ps)
         # a settled (poured) fill starts with its contacts' small Hertz overlaps: check leniently
         model = builder.finalize(device, overlap_tolerance=1.0 if any(f.settled for f in fills) else 0.05)
-        limits = wd.time_step_limits(model, self.v_ref)
+        # the step follows the material's smallest possible sphere, not the smallest one these fills
+        # drew: a world's step (and so its result) does not depend on the worlds it shares a batch
+        # with, whatever the split over processes or Ray tasks
+        limits = wd.time_step_limits_for([(material.particle, *material.smallest_sphere)], self.v_ref)
         if self.dt is not None:
             dt = self.dt
         elif self.dt_rayleigh_fraction is not None:
@@ -505,7 +509,8 @@ class Experiment:
         usable core). Warp runs CPU kernels on one thread, so this is how a CPU run uses several
         cores. Every world keeps its fill and parameters; worlds sharing one fill give the same
         results in any split (settled worlds wait at rest); with a fill per world the time step
-        and wall height follow each chunk's fills, so results can differ within the fill scatter.
+        follows the material (the same in every chunk); the walls' height above the fill and the hollow
+        cylinder's lift time follow each chunk's fills, so those can differ within the fill scatter.
         Ignored on CUDA, where one launch already runs every world. Scripts that use
         processes > 1 need the ``if __name__ == "__main__":`` guard (spawned interpreters).
 
