@@ -294,3 +294,20 @@ def test_proposed_measurement_lab_hours_are_checked():
     with pytest.raises(ValueError, match="lab_hours must be > 0"):
         _proposal("x", 0.0)
     assert dataclasses.replace(_proposal("x", 2), lab_hours=None).to_dict()["lab_hours"] is None
+
+
+def test_an_unknown_proposal_setting_is_one_line_and_exit_code_2(tmp_path, capsys):
+    import yaml
+    from pathlib import Path
+
+    from validation.cli import diagnose_main
+
+    configs = Path(__file__).parent.parent / "validation" / "configs"
+    doc = yaml.safe_load((configs / "tiny_diagnosis.yaml").read_text())
+    doc.update(measurements=str(configs / "tiny_lab.yaml"), output=str(tmp_path / "out"),
+               proposals=[{"experiment": "cylinder", "quantity": "pile_height", "settings": {"fill_kg": 4}}])
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(yaml.safe_dump(doc))
+    assert diagnose_main([str(cfg), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert "proposals[0].settings" in err and "'fill_kg'" in err and "fill_mass" in err and "Traceback" not in err
