@@ -17,6 +17,7 @@ from typing import Any, Literal, Mapping
 from pydantic import Field
 
 from warpdem import ConfigError
+from warpdem.config_io import check_sphere_memory
 from warpdem.config_schema import Flag, Number, Section, Text, WholeNumber, dataclass_section
 
 from .design import PumpDesign
@@ -31,8 +32,6 @@ MAX_STEPS = 100_000_000
 MAX_GRID_POINTS = 60_000_000
 #: the most particles one world may inject (the paper case injects about 30 per world)
 MAX_PARTICLES_PER_WORLD = 200_000
-#: memory one particle's sphere takes at most, all buffers and its reserve slot together [bytes]
-BYTES_PER_SPHERE = 4096
 
 Component = Literal[COMPONENTS]  # type: ignore[valid-type]
 
@@ -159,12 +158,6 @@ def _fluid_problems(fluid: Mapping[str, Any]) -> list[str]:
     return problems
 
 
-def _machine_memory() -> int | None:
-    from calibration.experiments.common import _machine_memory as memory
-
-    return memory()
-
-
 def cross_section_problems(cfg: Mapping[str, Any]) -> list[str]:
     """What one section cannot check alone, on a config of plain sections (defaults filled in);
     each problem one line naming its keys, nothing built but the design and the material."""
@@ -233,11 +226,11 @@ def cross_section_problems(cfg: Mapping[str, Any]) -> list[str]:
                         f"pump/config_schema.py): lower {source} or run fewer revolutions")
     else:
         per_particle = 1.0 if material.is_spheres else float(sum(f * len(t.radii) for t, f in material.clumps))
-        memory = particles * per_particle * BYTES_PER_SPHERE * run["worlds"]
-        total = _machine_memory()
-        if total and memory > total:
-            problems.append(f"run.worlds: {run['worlds']} world(s) of about {particles:.3g} particles need about "
-                            f"{memory / 1e9:.3g} GB; this machine has {total / 1e9:.3g} GB: run fewer worlds or "
-                            f"lower {source}")
+        try:
+            check_sphere_memory(particles * per_particle * run["worlds"], "run.worlds",
+                                f"run fewer worlds or lower {source} ({run['worlds']} world(s) of about "
+                                f"{particles:.3g} particles)")
+        except ConfigError as exc:
+            problems.append(str(exc))
     return problems
 

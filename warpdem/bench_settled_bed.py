@@ -32,7 +32,8 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
-from warpdem.config_io import device_arg, positive_int_arg
+from warpdem.config_io import (check_output_folder, check_sphere_memory, device_arg, existing_file_arg,
+                               nonnegative_int_arg, positive_float_arg, positive_int_arg)
 from warpdem.solver import (DEFAULT_FUSED_PLACEMENT, DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT,
                             DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_CANDIDATES, DEFAULT_WALL_STAGE,
                             NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
@@ -67,7 +68,7 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                     choices=["auto", "on", "off"],
                     help="the integrator places the member spheres, no placement launch per step (bare "
                          f"flag: on; default {DEFAULT_FUSED_PLACEMENT}: on on a GPU)")
-    ap.add_argument("--wall-candidates", type=int, default=DEFAULT_WALL_CANDIDATES,
+    ap.add_argument("--wall-candidates", type=nonnegative_int_arg, default=DEFAULT_WALL_CANDIDATES,
                     help="slots per sphere for the moving walls' triangles it may touch, kept between "
                          f"gatherings (0: query the moving walls' BVHs every step; default {DEFAULT_WALL_CANDIDATES})")
     ap.add_argument("--force-registers", type=option_value, default="auto",
@@ -257,18 +258,23 @@ def main(argv=None) -> dict:
     ap.add_argument("--device", type=device_arg, default=None, help="cpu or cuda (default: cuda if present)")
     ap.add_argument("--rolling", default="epsd", choices=["none", "cdt", "epsd"])
     ap.add_argument("--steps", type=positive_int_arg, default=2000)
-    ap.add_argument("--warmup", type=int, default=200)
-    ap.add_argument("--settle-time", type=float, default=3.0, help="max simulated settling time [s]")
-    ap.add_argument("--max-contacts", type=int, default=12)
+    ap.add_argument("--warmup", type=nonnegative_int_arg, default=200)
+    ap.add_argument("--settle-time", type=positive_float_arg, default=3.0, help="max simulated settling time [s]")
+    ap.add_argument("--max-contacts", type=positive_int_arg, default=12)
     ap.add_argument("--no-graph", action="store_true")
     ap.add_argument("--conditional-rebuild", action="store_true", help="skip the grid build on steps without a list rebuild")
     ap.add_argument("--order", default="morton", choices=["morton", "lattice"], help="memory order of the spheres")
     add_solver_options(ap)
     ap.add_argument("--save-state", default=None, metavar="NPZ",
                     help="save the settled State here (before the warm-up)")
-    ap.add_argument("--load-state", default=None, metavar="NPZ",
+    ap.add_argument("--load-state", type=existing_file_arg, default=None, metavar="NPZ",
                     help="start from this settled State instead of settling")
     args = ap.parse_args(argv)
+    check_sphere_memory(args.spheres * args.worlds, "--spheres x --worlds", "run fewer spheres or worlds")
+    if args.save_state:
+        from pathlib import Path
+
+        check_output_folder(Path(args.save_state).parent, "--save-state", "the folder of the saved state")
     quiet_warp()
     device = args.device or ("cuda" if wp.is_cuda_available() else "cpu")
     t0 = time.perf_counter()

@@ -10,11 +10,15 @@ Writing: :func:`write_atomic` replaces a file whole (temporary file in the same 
 rename), so a reader or a kill sees the old file or the new one, never a part.
 
 Checks at load (before any DEM): :func:`check_output_folder` (created, a folder, writable),
-:func:`check_device` (cpu, cuda, cuda:N that exists here), :func:`parse_processes`.
+:func:`check_device` (cpu, cuda, cuda:N that exists here), :func:`parse_processes`,
+:func:`check_sphere_memory` (the spheres a run holds against this machine's memory), and the
+``argparse`` types of counts and numbers (:func:`positive_int_arg`, :func:`nonnegative_int_arg`,
+:func:`positive_float_arg`, :func:`nonnegative_float_arg`), so an option is refused naming it.
 """
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import tempfile
@@ -26,7 +30,9 @@ import yaml
 from .errors import ConfigError
 
 __all__ = ["DuplicateKeyError", "load_config_file", "parse_yaml", "parse_json", "read_text_file", "write_atomic",
-           "check_output_folder", "check_device", "parse_processes", "processes_arg", "device_arg", "positive_int_arg"]
+           "check_output_folder", "check_device", "parse_processes", "processes_arg", "device_arg", "positive_int_arg",
+           "nonnegative_int_arg", "positive_float_arg", "nonnegative_float_arg", "BYTES_PER_SPHERE", "machine_memory",
+           "check_sphere_memory", "existing_file_arg"]
 
 
 class DuplicateKeyError(ConfigError):
@@ -255,3 +261,83 @@ def positive_int_arg(text: str) -> int:
     if n < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {n}")
     return n
+
+
+def nonnegative_int_arg(text: str) -> int:
+    """argparse ``type=`` of a count that may be 0: a whole number >= 0."""
+    import argparse
+
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
+    return n
+
+
+def _finite_float(text: str) -> float:
+    import argparse
+
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return x
+
+
+def positive_float_arg(text: str) -> float:
+    """argparse ``type=`` of a finite number > 0 (a time, a speed, a rate)."""
+    import argparse
+
+    x = _finite_float(text)
+    if not x > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return x
+
+
+def nonnegative_float_arg(text: str) -> float:
+    """argparse ``type=`` of a finite number >= 0 (a friction coefficient, a start time)."""
+    import argparse
+
+    x = _finite_float(text)
+    if x < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return x
+
+
+def existing_file_arg(text: str) -> str:
+    """argparse ``type=`` of a file to read: it must exist and be a file."""
+    import argparse
+
+    if not Path(text).is_file():
+        raise argparse.ArgumentTypeError(f"{text}: {'a folder, not a file' if Path(text).is_dir() else 'no such file'}")
+    return text
+
+
+# ----------------------------------------------------------------------------- resources
+#: memory one sphere of a run takes at most, all buffers together [bytes] (state, contact and
+#: neighbour slots, fill generation): with the sphere count, the memory estimate of a run
+BYTES_PER_SPHERE = 4096
+
+
+def machine_memory() -> int | None:
+    """Physical memory of this machine [bytes] (None where the platform does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_sphere_memory(spheres: float, key: str, fix: str) -> float:
+    """Refuse (ConfigError naming ``key``) a run of ``spheres`` spheres in all worlds whose memory
+    estimate (:data:`BYTES_PER_SPHERE` each) exceeds this machine's memory; ``fix`` says what to
+    lower. Returns the estimate [bytes]."""
+    need = float(spheres) * BYTES_PER_SPHERE
+    total = machine_memory()
+    if total and need > total:
+        raise ConfigError(f"{key}: {spheres:.3g} spheres need about {need / 1e9:.3g} GB ({BYTES_PER_SPHERE} bytes "
+                          f"each); this machine has {total / 1e9:.3g} GB: {fix}")
+    return need

@@ -19,7 +19,8 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import geometry
-from warpdem.config_io import check_output_folder, device_arg, positive_int_arg
+from warpdem.config_io import (check_output_folder, check_sphere_memory, device_arg, nonnegative_float_arg,
+                               positive_int_arg)
 from warpdem.io import write_vtk
 
 
@@ -42,9 +43,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--device", type=device_arg, default=None, help="cpu or cuda (default: cuda if present, else cpu)")
     ap.add_argument("--out", default="out/pour_box", help="output folder for VTK files")
     ap.add_argument("--frames", type=positive_int_arg, default=20, help="VTK frames to write")
-    ap.add_argument("--mu", type=float, default=0.5, help="sliding friction (particle-particle and -wall)")
-    ap.add_argument("--mu-r", type=float, default=0.1, help="rolling friction (EPSD)")
+    ap.add_argument("--mu", type=nonnegative_float_arg, default=0.5,
+                    help="sliding friction (particle-particle and -wall)")
+    ap.add_argument("--mu-r", type=nonnegative_float_arg, default=0.1, help="rolling friction (EPSD)")
     args = ap.parse_args(argv)
+    check_sphere_memory(args.spheres, "--spheres", "pour fewer spheres")
     check_output_folder(args.out, "--out")
     from warpdem.warp_output import quiet_warp
 

@@ -23,26 +23,26 @@ import sys
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from pydantic import Field, ValidationError, field_validator
+
 from warpdem import ConfigError
 from warpdem.config_io import (check_device, check_output_folder, device_arg, load_config_file, parse_processes,
                                processes_arg, write_atomic)
+from warpdem.config_schema import Flag, Section, Text, problem_lines, raise_problems
 
 from . import EXPERIMENTS, ExperimentResult, make_experiment
 
-__all__ = ["experiment_main", "load_config", "run_config", "plot_result"]
+__all__ = ["experiment_main", "load_config", "run_config", "plot_result", "ExperimentFile"]
 
-CONFIG_KEYS = ("experiment", "scale", "device", "processes", "output", "material", "contact_law", "plugins",
-               "settings", "parameters", "progress", "description")
 
 
 def load_config(path: str | os.PathLike) -> dict[str, Any]:
-    """Read a YAML or JSON experiment config and check its top-level keys."""
+    """Read a YAML or JSON experiment config and check it whole (:func:`check_config`,
+    :func:`deeper_problems`) before any DEM runs."""
     p = Path(path)
     cfg = check_config(load_config_file(p, "experiment config"), str(p))
     cfg["_base_dir"] = str(p.parent)
-    problems = deeper_problems(cfg)
-    if problems:
-        raise ConfigError(f"{p}: {len(problems)} problem{'s' if len(problems) > 1 else ''}:\n" + "\n".join(f"  - {m}" for m in problems))
+    raise_problems(str(p), deeper_problems(cfg))
     return cfg
 
 
@@ -95,23 +95,53 @@ def deeper_problems(cfg: Mapping[str, Any]) -> list[str]:
     return problems
 
 
+class ExperimentFile(Section):
+    """The experiment config's schema (module docstring): every key, its type; an unknown key is
+    refused. What depends on the experiment (its settings, the parameter names, the model) is
+    :func:`deeper_problems`."""
+
+    experiment: Text
+    scale: Text = "paper"
+    device: Text | None = None
+    processes: Any = None
+    output: Text | None = Field(None, min_length=1)
+    material: Any = None
+    contact_law: Any = None
+    plugins: Any = None
+    settings: dict[Text, Any] | None = None
+    parameters: Any
+    progress: Flag = False
+    description: Text = ""
+
+    @field_validator("experiment")
+    @classmethod
+    def _registered(cls, v: str) -> str:
+        if v not in EXPERIMENTS:
+            raise ValueError(f"unknown experiment {v!r}; valid: {sorted(EXPERIMENTS)}")
+        return v
+
+    @field_validator("processes")
+    @classmethod
+    def _processes(cls, v: Any) -> Any:
+        try:
+            return parse_processes(v, "processes")
+        except ConfigError:
+            raise ValueError("must be a whole number >= 1 or 'auto'") from None
+
+
 def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
-    """Validate the top level of a config mapping; every problem found is listed in one ConfigError."""
+    """Validate the top level of a config mapping (:class:`ExperimentFile`, then where the model
+    and scale belong); every problem found is listed in one ConfigError."""
     if not isinstance(cfg, Mapping):
-        raise ConfigError(f"{source}: an experiment config must be a mapping, got {type(cfg).__name__}")
+        raise ConfigError(f"{source}: an experiment config must be a mapping of keys, got "
+                          f"{'an empty file' if cfg is None else type(cfg).__name__}")
     problems: list[str] = []
-    unknown = sorted(set(cfg) - set(CONFIG_KEYS))
-    if unknown:
-        problems.append(f"unknown key(s) {unknown}; valid: {list(CONFIG_KEYS)}")
-    if "experiment" not in cfg:
-        problems.append(f"missing 'experiment' (one of {sorted(EXPERIMENTS)})")
-    elif cfg["experiment"] not in EXPERIMENTS:
-        problems.append(f"unknown experiment {cfg['experiment']!r}; valid: {sorted(EXPERIMENTS)}")
-    if "parameters" not in cfg:
-        problems.append("missing 'parameters' (a list of per-world contact parameter sets)")
+    try:
+        ExperimentFile.model_validate(dict(cfg))
+    except ValidationError as exc:
+        problems += problem_lines(exc, ExperimentFile)
     settings = cfg.get("settings") or {}
     if not isinstance(settings, Mapping):
-        problems.append("'settings' must be a mapping of experiment settings")
         settings = {}
     if "material" in settings and "material" in cfg:
         problems.append("give 'material' either at the top level or in 'settings', not both")
@@ -120,16 +150,11 @@ def check_config(cfg: Any, source: str = "<mapping>") -> dict[str, Any]:
     for k in ("contact_law", "plugins"):
         if k in settings:
             problems.append(f"put '{k}' at the top level, not in 'settings'")
-    for check in (lambda: check_device(cfg.get("device"), "device", present=False),  # present: checked at the run
-                  lambda: parse_processes(cfg.get("processes"), "processes")):
-        try:
-            check()
-        except ConfigError as exc:
-            problems.append(str(exc))
-    if len(problems) == 1:
-        raise ConfigError(f"{source}: {problems[0]}")
-    if problems:
-        raise ConfigError(f"{source}: {len(problems)} problems:\n" + "\n".join(f"  - {m}" for m in problems))
+    try:
+        check_device(cfg.get("device"), "device", present=False)  # present: checked at the run
+    except ConfigError as exc:
+        problems.append(str(exc))
+    raise_problems(source, problems)
     return dict(cfg)
 
 

@@ -29,6 +29,8 @@ import trimesh
 
 import warpdem as wd
 from warpdem import ConfigError, ContactOverflowError, StabilityError
+from warpdem.config_io import BYTES_PER_SPHERE as _BYTES_PER_SPHERE
+from warpdem.config_io import machine_memory
 
 from ..executor import LocalExecutor, RayExecutor
 from ..filling import FillResult, add_fill, pour_fill, random_fill
@@ -44,9 +46,8 @@ G = 9.81
 #: the most particles one world's fill may hold (the paper-scale fills hold 750 to 1800): a larger
 #: fill is refused when the experiment is built, before any DEM (:meth:`Experiment.check_size`)
 MAX_PARTICLES_PER_WORLD = 200_000
-#: memory one sphere of a world takes at most, all buffers together [bytes] (state, contact and
-#: neighbour slots, fill generation): with the sphere count, the memory estimate of a world
-BYTES_PER_SPHERE = 4096
+#: memory one sphere of a world takes at most [bytes] (warpdem.config_io.BYTES_PER_SPHERE)
+BYTES_PER_SPHERE = _BYTES_PER_SPHERE
 
 
 # --------------------------------------------------------------------------- meshes
@@ -75,6 +76,9 @@ def normalize_parameter_sets(parameter_sets: Sequence[Mapping[str, float]] | Map
     if isinstance(parameter_sets, Mapping):
         if not parameter_sets:
             raise ConfigError("parameter sets ('parameters'): empty mapping; give at least one world")
+        for k, v in parameter_sets.items():
+            if any(isinstance(x, (bool, str)) for x in np.ravel(np.asarray(v, dtype=object))):
+                raise ConfigError(f"parameter sets: '{k}' must be a number or a list of numbers, got {v!r}")
         try:
             arrays = {k: np.atleast_1d(np.asarray(v, dtype=float)) for k, v in parameter_sets.items()}
         except (TypeError, ValueError) as exc:
@@ -84,6 +88,10 @@ def normalize_parameter_sets(parameter_sets: Sequence[Mapping[str, float]] | Map
             raise ConfigError(f"parameter sets: arrays differ in length {lengths}")
         n = next(iter(lengths.values()))
         sets = [{k: float(a[i]) for k, a in arrays.items()} for i in range(n)]
+    elif isinstance(parameter_sets, (str, bytes)) or not isinstance(parameter_sets, Sequence) \
+            or not all(isinstance(s, Mapping) for s in parameter_sets):
+        raise ConfigError("parameter sets ('parameters'): a list of mappings (one per world: {mu_s_pp: 0.3, ...}) or "
+                          f"a mapping of equal-length lists, got {parameter_sets!r}")
     else:
         sets = [dict(s) for s in parameter_sets]
         if not sets:
@@ -94,6 +102,8 @@ def normalize_parameter_sets(parameter_sets: Sequence[Mapping[str, float]] | Map
             if k not in valid:
                 raise ConfigError(f"parameter set {w}: unknown contact parameter '{k}'; this contact law has {valid}")
             try:
+                if isinstance(v, (bool, str)):
+                    raise TypeError(v)
                 value = float(v)
             except (TypeError, ValueError):
                 raise ConfigError(f"parameter set {w}: '{k}' must be a number, got {v!r}") from None
@@ -718,10 +728,7 @@ def _yaml_number_hint(value: Any) -> str:
 
 def _machine_memory() -> int | None:
     """Physical memory of this machine [bytes] (None where the platform does not say)."""
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return None
+    return machine_memory()
 
 
 def cpu_processes(processes: int | str | None, device: str | None) -> int:

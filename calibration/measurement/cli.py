@@ -19,6 +19,9 @@ import sys
 from pathlib import Path
 from typing import Any, Sequence
 
+from warpdem.config_io import nonnegative_int_arg, positive_float_arg, positive_int_arg
+from warpdem.errors import ConfigError
+
 from .errors import MeasurementError, MeasurementFileError
 
 _VIDEO_EXT = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".wmv", ".mpg", ".mpeg")
@@ -32,6 +35,33 @@ def _positive_scale(text: str) -> float:
         raise argparse.ArgumentTypeError(f"--scale must be a number of pixels per mm, got {text!r}") from None
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"--scale must be > 0 pixels per mm, got {text}")
+    return value
+
+
+def _finite(text: str) -> float:
+    """A finite number (a position, a time, a height)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
+def _grey_level(text: str) -> float:
+    """``--threshold``: a grey level 0-255."""
+    value = _finite(text)
+    if not 0 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"must be a grey level 0-255, got {text}")
+    return value
+
+
+def _angle_deg(text: str) -> float:
+    """``--min-angle``: an angle 0 <= a < 90 deg."""
+    value = _finite(text)
+    if not 0 <= value < 90:
+        raise argparse.ArgumentTypeError(f"must be an angle 0 <= a < 90 deg, got {text}")
     return value
 
 
@@ -49,29 +79,29 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --file and no --experiment: also measure image/video conditions")
     g = p.add_argument_group("image settings (override the file's image_settings)")
     g.add_argument("--scale", type=_positive_scale, metavar="PX_PER_MM", help="image scale, px/mm (> 0)")
-    g.add_argument("--window", type=float, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
+    g.add_argument("--window", type=_finite, nargs=4, metavar=("X0", "X1", "Z0", "Z1"),
                    help="fit window, x right and z up from --origin-px: in mm with a scale (--scale or "
                         "the file's), else in px; it must lie inside the image")
-    g.add_argument("--window-px", type=float, nargs=4, metavar=("C0", "C1", "R0", "R1"),
+    g.add_argument("--window-px", type=_finite, nargs=4, metavar=("C0", "C1", "R0", "R1"),
                    help="fit window in pixel columns C0-C1 and rows R0-R1 counted from the top "
                         "(row 0 = top row); it must lie inside the image")
-    g.add_argument("--origin-px", type=float, nargs=2, metavar=("COL", "ROW"),
+    g.add_argument("--origin-px", type=_finite, nargs=2, metavar=("COL", "ROW"),
                    help="pixel of x = z = 0 (default: bottom-left pixel)")
     g.add_argument("--material", choices=("auto", "dark", "bright"))
-    g.add_argument("--threshold", type=float, help="grey level (0-255); default Otsu")
-    g.add_argument("--band", type=float, nargs=2, metavar=("LO", "HI"),
+    g.add_argument("--threshold", type=_grey_level, help="grey level (0-255); default Otsu")
+    g.add_argument("--band", type=_finite, nargs=2, metavar=("LO", "HI"),
                    help="fit only edge points with LO*h_ref <= z <= HI*h_ref")
-    g.add_argument("--h-ref", type=float, help="reference height for --band (default: highest edge point)")
-    g.add_argument("--min-angle", type=float, help="smallest angle accepted, degrees (default 1)")
-    g.add_argument("--open-px", type=int)
-    g.add_argument("--close-px", type=int)
+    g.add_argument("--h-ref", type=positive_float_arg, help="reference height for --band (default: highest edge point)")
+    g.add_argument("--min-angle", type=_angle_deg, help="smallest angle accepted, degrees (default 1)")
+    g.add_argument("--open-px", type=nonnegative_int_arg)
+    g.add_argument("--close-px", type=nonnegative_int_arg)
     v = p.add_argument_group("video (rotating drum, spec B)")
     v.add_argument("--video", action="store_true", help="treat source as a video")
-    v.add_argument("--fps", type=float, help="frame rate (default: from the file)")
-    v.add_argument("--rpm", type=float, default=30.0)
-    v.add_argument("--discard", type=int, default=5, help="revolutions discarded (paper: 5)")
-    v.add_argument("--record", type=int, default=10, help="revolutions measured (paper: 10)")
-    v.add_argument("--t0", type=float, default=0.0, help="time the rotation starts, s")
+    v.add_argument("--fps", type=positive_float_arg, help="frame rate (default: from the file)")
+    v.add_argument("--rpm", type=positive_float_arg, default=30.0)
+    v.add_argument("--discard", type=nonnegative_int_arg, default=5, help="revolutions discarded (paper: 5)")
+    v.add_argument("--record", type=positive_int_arg, default=10, help="revolutions measured (paper: 10)")
+    v.add_argument("--t0", type=_finite, default=0.0, help="time the rotation starts, s")
     o = p.add_argument_group("output")
     o.add_argument("--diagnostic", help="diagnostic picture for an image (default ./<stem>_measure.png)")
     o.add_argument("--diagnostic-dir", help="folder for diagnostic pictures of a video or file entry")
@@ -161,6 +191,71 @@ def check_window_inside(path: str, kw: dict[str, Any], video: bool = False) -> N
             f"(columns 0-{wid}, rows 0-{hgt}); give a window inside the image")
 
 
+def _window_problem(option: str, window: Sequence[float], px: bool, unit: str) -> str | None:
+    """A window with zero or negative width or height (or under 2 px in pixels) in ``unit``: its message."""
+    x0, x1, z0, z1 = window
+    what = ("columns", "rows") if px else ("x", "z")
+    for (lo, hi), axis, size in (((x0, x1), what[0], "wide"), ((z0, z1), what[1], "high")):
+        if hi <= lo:
+            return (f"{option} {' '.join(f'{v:g}' for v in window)}: the window is {hi - lo:g} {unit} {size} "
+                    f"({axis} {lo:g} to {hi:g}); give the smaller value first and a window of positive size")
+        if px and hi - lo < 2:
+            return (f"{option} {' '.join(f'{v:g}' for v in window)}: the window is {hi - lo:g} px {size} ({axis} "
+                    f"{lo:g} to {hi:g}); a profile needs at least 2 px each way")
+    return None
+
+
+def option_problem(a: argparse.Namespace) -> str | None:
+    """The first usage error among the options (checked before anything is measured), or None:
+    a source and --file together, neither, --window with --window-px, an empty or reversed window or
+    band, --experiment/--condition without --file, a diagnostic folder that cannot be written, a
+    source OpenCV cannot read."""
+    if a.file and a.source:
+        return "give either a source image/video or --file, not both"
+    if not a.file and not a.source:
+        return "nothing to measure: give an image/video path or --file"
+    if (a.experiment or a.condition) and not a.file:
+        return "--experiment and --condition pick a condition of --file; give --file"
+    if a.window is not None and a.window_px is not None:
+        return "give --window or --window-px, not both"
+    for option, window, px in (("--window", a.window, False), ("--window-px", a.window_px, True)):
+        problem = window is not None and _window_problem(option, window, px, "px" if px or not a.scale else "mm")
+        if problem:
+            return problem
+    if a.band is not None and not 0 <= a.band[0] < a.band[1]:
+        return f"--band {a.band[0]:g} {a.band[1]:g}: give 0 <= LO < HI (fractions of the reference height)"
+    for option, path in (("--diagnostic", a.diagnostic), ("--diagnostic-dir", a.diagnostic_dir)):
+        if path is None or a.no_diagnostic:
+            continue
+        folder = Path(path) if option == "--diagnostic-dir" else Path(path).parent
+        from warpdem.config_io import check_output_folder
+
+        try:
+            check_output_folder(folder, option, "the diagnostic folder")
+        except ConfigError as exc:
+            return str(exc)
+    if a.source and not a.file:
+        video = bool(a.video or a.source.lower().endswith(_VIDEO_EXT))
+        if _frame_size(a.source, video) is None:
+            return (f"{a.source}: not {'a video' if video else 'an image'} OpenCV can read (is it the right file? "
+                    f"{'--video treats it as a video' if not video else 'an image needs no --video'})")
+    return None
+
+
+def check_runnable_settings(mf: Any) -> None:
+    """The settings of every condition of an experiment the DEM can run (version 2) checked as the
+    diagnosis checks them: names among the experiment's settings, types, values (the experiment is
+    built); other experiments' conditions are the lab's own (this command only measures them)."""
+    from .records import check_settings, registered_experiments
+
+    if mf.version != 2:
+        return
+    known = registered_experiments()
+    specs = {name: known.get(name) or {k for c in exp.conditions.values() for k in c.settings}
+             for name, exp in mf.experiments.items()}
+    check_settings(mf, specs, build=True)
+
+
 def _clean(obj: Any) -> Any:
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
@@ -182,11 +277,15 @@ def _run(a: argparse.Namespace) -> dict:
     over = _overrides(a)
     if a.file:
         mf = load_measurements(a.file)
+        check_runnable_settings(mf)
         if not a.experiment:
             if a.source:
                 raise MeasurementError("give either a source image/video or --file, not both")
             return {"file": a.file, "experiments": mf.summary(measure_images=a.measure_images)}
-        cond = mf.condition(a.experiment, a.condition)
+        try:
+            cond = mf.condition(a.experiment, a.condition)
+        except MeasurementError as exc:  # the option names what the file does not hold
+            raise ConfigError(f"--experiment/--condition: {exc}") from None
         out: dict[str, Any] = {"file": a.file, "experiment": cond.experiment, "condition": cond.name,
                                "kind": cond.kind, "data": cond.data}
         ddir = None if a.no_diagnostic else (a.diagnostic_dir or f"measure_{cond.experiment}_{cond.name}")
@@ -240,6 +339,10 @@ def measure_main(argv: Sequence[str] | None = None) -> int:
         if given is not None and not Path(given).is_file():
             print(f"warpdem measure: no such file: {given!r}", file=sys.stderr)
             return 2
+    problem = option_problem(a)
+    if problem is not None:  # a usage error: refused before anything is measured
+        print(f"warpdem measure: {problem}", file=sys.stderr)
+        return 2
     if a.json_out:  # checked before anything is measured
         target = Path(a.json_out)
         if target.is_dir():
@@ -255,7 +358,7 @@ def measure_main(argv: Sequence[str] | None = None) -> int:
             return 2
     try:
         out = _clean(_run(a))
-    except MeasurementFileError as e:  # the user's file is malformed: a usage error, not a failed measurement
+    except (MeasurementFileError, ConfigError) as e:  # a malformed file or a wrong option: not a failed measurement
         print(json.dumps({"error": str(e)}), file=sys.stdout)
         print(f"warpdem measure: {e}", file=sys.stderr)
         return 2

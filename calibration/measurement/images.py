@@ -342,10 +342,14 @@ def _window_px(
         r1 = int(math.floor(origin[1] - z0 * scale + 1e-9)) + 1
     else:
         raise ValueError(f"window_units must be 'mm' or 'px', got {window_units!r}")
+    if abs(c1 - c0) < 2 or abs(r1 - r0) < 2:  # too small wherever it lies: not "outside the image"
+        raise MeasurementError(f"measurement window {list(window)} ({window_units}) is {abs(c1 - c0)} px wide and "
+                               f"{abs(r1 - r0)} px high; a profile needs at least 2 px each way: give a larger window")
     c0, c1 = max(0, min(c0, c1)), min(wid, max(c0, c1))
     r0, r1 = max(0, min(r0, r1)), min(hgt, max(r0, r1))
     if c1 - c0 < 2 or r1 - r0 < 2:
-        raise MeasurementError(f"measurement window {window} ({window_units}) lies outside the image")
+        raise MeasurementError(f"measurement window {list(window)} ({window_units}) lies outside the image "
+                               f"of {wid} x {hgt} px")
     return c0, c1, r0, r1
 
 
