@@ -46,7 +46,7 @@ import warp as wp
 
 import warpdem as wd
 from warpdem import ConfigError
-from warpdem.config_io import check_device, check_output_folder, load_config_file
+from warpdem.config_io import check_device, check_output_folder, load_config_file, positive_int_arg
 from warpdem.config_schema import raise_problems, validate_section
 
 from .campaign_records import (RECORD_FORMAT, append_records, code_version, describe_differences, fingerprint,
@@ -974,7 +974,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--retry-failed", action="store_true", help="run the samples recorded as failed again")
     ap.add_argument("--only", nargs="+", default=None, metavar="RESPONSE",
                     help="with --max-samples: run only these responses (e.g. alpha_static)")
-    ap.add_argument("--max-samples", type=int, default=None,
+    ap.add_argument("--max-samples", type=positive_int_arg, default=None,
                     help="run at most N new design samples per response, then stop before the analysis "
                          "(run the command again to continue; nothing already run is repeated)")
     ap.add_argument("--new-folder", action="store_true",
@@ -988,6 +988,10 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         ap.error("--only needs --max-samples (the analysis uses every response)")
     try:
         cfg = load_config(args.config)
+        unknown = sorted(set(args.only or ()) - {r.name for r in cfg.responses})
+        if unknown:
+            raise ConfigError(f"--only: unknown response(s) {unknown}; this campaign has "
+                              f"{[r.name for r in cfg.responses]}")
     except ConfigError as exc:
         print(f"warpdem calibrate: configuration error: {exc}", file=sys.stderr)
         return 2

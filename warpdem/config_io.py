@@ -4,7 +4,9 @@ Reading (every config and measurement file of every command goes through :func:`
 or :func:`parse_yaml`): a missing file, a file that is not UTF-8 text, invalid YAML/JSON and a key
 given twice in one mapping (YAML or JSON) are a :class:`~warpdem.errors.ConfigError` naming the
 file, and for a repeated key the key and its line. A repeated key is never "the last one wins":
-a repeated observable or condition would otherwise replace the first without a word.
+a repeated observable or condition would otherwise replace the first without a word. A number
+with an exponent is a number (``6.0e4``, ``1e-5``: YAML 1.2's rule; PyYAML's YAML 1.1 reads them
+as text).
 
 Writing: :func:`write_atomic` replaces a file whole (temporary file in the same folder, fsync,
 rename), so a reader or a kill sees the old file or the new one, never a part.
@@ -74,6 +76,13 @@ class UniqueKeyLoader(yaml.SafeLoader):
                 raise _RepeatedKey(key, line, seen[key])
             seen[key] = line
         return super().construct_mapping(node, deep)
+
+
+# YAML 1.1 (PyYAML) reads an exponent without a dot and a sign (1e-5, 6.0e4, 1.0e6) as text; YAML 1.2
+# and every user read it as a number: so does this loader (1.0e+6 and 1.0e-5 were numbers already)
+UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
 
 
 def parse_yaml(text: str, source: str) -> Any:
