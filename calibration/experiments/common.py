@@ -478,7 +478,7 @@ class Experiment:
 
     def _build_model(self, law: wd.ContactLaw, material: BulkMaterial, fills: list[FillResult],
                      sets: list[dict[str, float]], defaults: dict[str, float], t_motion: float, device: str | None,
-                     max_contacts: int, max_neighbours: int | None):
+                     max_contacts: int, max_neighbours: int | None, materials: Sequence[BulkMaterial] | None = None):
         """Model (one world per parameter set), its Simulation, the time step and its limits."""
         nw = len(sets)
         builder = wd.ModelBuilder(num_worlds=nw, contact_law=law, max_contacts=max_contacts)
@@ -495,10 +495,16 @@ class Experiment:
                 builder.set_contact_parameters(world=w, **ps)
         # a settled (poured) fill starts with its contacts' small Hertz overlaps: check leniently
         model = builder.finalize(device, overlap_tolerance=1.0 if any(f.settled for f in fills) else 0.05)
-        # the step follows the material's smallest possible sphere, not the smallest one these fills
+        # the step follows the materials' smallest possible sphere, not the smallest one these fills
         # drew: a world's step (and so its result) does not depend on the worlds it shares a batch
-        # with, whatever the split over processes or Ray tasks
-        limits = wd.time_step_limits_for([(material.particle, *material.smallest_sphere)], self.v_ref)
+        # with, whatever the split over processes or Ray tasks (worlds of different shape parameters
+        # are different materials: their batch takes the smallest of its materials)
+        # (clumps: a template's members, which a fill may scale within its size class, so the model's
+        # own limit still caps the step; spheres never draw below the distribution's lower end)
+        kinds = {_material_key(m): m for m in (materials or [material])}
+        by_material = wd.time_step_limits_for([(m.particle, *m.smallest_sphere) for m in kinds.values()], self.v_ref)
+        drawn = wd.time_step_limits(model, self.v_ref)
+        limits = by_material if by_material.recommended <= drawn.recommended else drawn
         if self.dt is not None:
             dt = self.dt
         elif self.dt_rayleigh_fraction is not None:
@@ -592,7 +598,7 @@ class Experiment:
                 retries = list(saved.get("retries") or [])
         while True:
             model, sim, dt, limits = self._build_model(law, material, fills, sets, defaults, t_motion, device,
-                                                       max_contacts, max_neighbours)
+                                                       max_contacts, max_neighbours, materials)
             resume = None
             if saved is not None:
                 loaded = checkpoint.load(saved, model, device, sim.solver.max_neighbours)
