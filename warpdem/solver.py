@@ -403,6 +403,11 @@ class DEMSolver:
             wide = model.max_radius > 2.0 * model.min_radius
             max_neighbours = (8 if clumps else 6 if wide else 3) * model.max_contacts
         self.max_neighbours = int(max_neighbours)
+        if model.num_spheres * self.max_neighbours >= 2 ** 31:
+            raise ConfigError(
+                f"the neighbour list would need {model.num_spheres} spheres x {self.max_neighbours} slots = "
+                f"{model.num_spheres * self.max_neighbours:.3g} entries, past Warp's array limit of 2^31: run fewer "
+                f"worlds per launch (a campaign's batch_worlds) or pass a smaller max_neighbours")
         # side of a search cell [m]: every neighbour within r_i + r_j + skin lies in the 27 cells around
         self.cell_size = 2.0 * model.max_radius + self.skin
         self.grid: wp.HashGrid | None = None

@@ -196,7 +196,7 @@ class Experiment:
     ke_per_particle: settled criterion [J] (spec A: 1e-6); fill_settle_max_time [s] (spec A: 1.5;
         extended by the fall time when the loose column stands above the walls).
     settle_check_interval, removal_interval: [s] between KE checks / removals of escaped particles.
-    max_contacts: contact slots per sphere (at least 16 + 8 (n - 1) for clumps of n members);
+    max_contacts: contact slots per sphere (at least min(16 + 8 (n - 1), 64) for clumps of n members);
         max_neighbours: neighbour-list slots per sphere (None:
         the solver's default). A run whose slots overflow is run again from the same fill with
         more slots (``overflow_retries`` times at most; recorded in ``timing["retries"]``).
@@ -706,11 +706,19 @@ class Experiment:
 
 
 def _contact_slots(materials: Sequence[BulkMaterial]) -> int:
-    """Contact slots per sphere a batch's materials need: a member sphere of a clump can touch
-    every member of each neighbouring clump, so clumps of n members get 16 + 8 (n - 1) (rods
-    close to a sphere, whose members nearly coincide, overflowed 36 slots)."""
+    """Contact slots per sphere a batch's materials need at the start: a member sphere of a clump can
+    touch every member of each neighbouring clump, so clumps of n members get 16 + 8 (n - 1) (rods
+    close to a sphere, whose members nearly coincide, overflowed 36 slots), at most
+    :data:`MAX_START_CONTACT_SLOTS`: the paper's 22-25-member gravel asked 208 slots and 8 x 208
+    neighbour slots per sphere, 2.5e9 list entries for a batch of 37 worlds (past Warp's 2^31 array
+    limit and ~10 GB). A batch that needs more overflows and runs again with 1.5 x the slots
+    (``overflow_retries``)."""
     n = max((len(t.radii) for m in materials for t, _ in (m.clumps or ())), default=1)
-    return 16 + 8 * (n - 1)
+    return min(16 + 8 * (n - 1), MAX_START_CONTACT_SLOTS)
+
+
+#: the most contact slots per sphere a batch starts with (more only after an overflow)
+MAX_START_CONTACT_SLOTS = 64
 
 
 def _material_key(m: BulkMaterial) -> Any:
