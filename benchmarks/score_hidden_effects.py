@@ -13,11 +13,14 @@ evidence gap to the runner-up), what it added, the error history (chi^2/dof and 
 A case of the engine-as-lab generator (``validation.hidden_effects``) passes when the top-ranked
 candidate is the hidden effect (for the base case: the verdict "no effect is needed"). A case whose
 truth lists its ``hidden_effects`` (the LIGGGHTS lab, ``validation.reference.liggghts_labs``) is
-judged on what the diagnosis added: right when it added exactly those effects, in either order
-(two hidden effects: both added); none hidden: the base model adequate and nothing added; an effect
-outside the candidates (``outside_candidates``): nothing added and the diagnosis says none of its
-candidates explains the data, by a ``verdict.none_of_candidates`` field when the diagnosis writes
-one, else by its headline or last round's reason in today's words (:data:`NONE_OF_CANDIDATES_WORDS`).
+judged on the verdict: right when the diagnosis added exactly those effects, in either order (two
+hidden effects: both added), and did not disown them as "none of the candidates explains these
+measurements"; none hidden: the base model adequate and nothing added; an effect outside the
+candidates (``outside_candidates``): the diagnosis says none of its candidates explains the data
+(whatever it studied on the way). That verdict is read from ``verdict.none_of_candidates`` when the
+diagnosis writes it (validation/diagnose.py does since 2026-11-28: True also when effects were
+added but an observable stays beyond the cut-off), else from the headline or the last round's
+reason in the older words (:data:`NONE_OF_CANDIDATES_WORDS`).
 The recalibration's agreement is reported separately, since a right effect with an imperfect
 recalibration is a different failure from a wrong effect.
 """
@@ -91,10 +94,10 @@ def case_found(truth: dict[str, Any], row: dict[str, Any], diag: dict[str, Any])
         hidden = hidden_effect(truth)
         return row["top"] == hidden if hidden else bool(verdict["base_adequate"] and not row["added"])
     if outside:
-        return not row["added"] and row["none_of_candidates"] is not None
+        return row["none_of_candidates"] is not None
     if not effects:
         return bool(verdict["base_adequate"] and not row["added"])
-    return set(row["added"]) == set(effects)
+    return set(row["added"]) == set(effects) and row["none_of_candidates"] is None
 
 
 def score_case(folder: Path, case: str) -> dict[str, Any]:
@@ -166,7 +169,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         z = " -> ".join(f"{v['max_abs_z']:.1f}" for v in h)
         out.append(f"| {r['case']} ({r['hidden'] or 'none'}) | {first} | {second} | "
                    f"{'yes' if r['found'] else 'NO, tied with it' if r.get('tied_not_first') else 'NO'} | "
-                   f"{', '.join(r['added']) or ('- (none of the candidates)' if r.get('none_of_candidates') else '-')} "
+                   f"{', '.join(r['added']) or '-'}{' (none of the candidates explains it)' if r.get('none_of_candidates') else ''} "
                    f"| {chi} | {z} | "
                    f"{'yes' if r['final_within_2_sigma'] else 'no'}"
                    + (f" ({len(r['local_noise'])} judged with their own fills' scatter)" if r.get("local_noise") else "")

@@ -19,7 +19,8 @@ from validation.hidden_effects import TRUE_FRICTION
 from validation.reference.liggghts import liggghts_executable
 from validation.reference.liggghts_labs import (CANDIDATES, LAB_CASES, LabRun, canonical_case, case_material,
                                                 generate_labs, lab_deck, lab_diagnosis_config, lab_document,
-                                                plan_runs, truth_document, _max_fill_index, _stated_material)
+                                                plan_runs, poured_amount, truth_document, _max_fill_index,
+                                                _stated_material)
 
 ROOT = Path(__file__).parent.parent
 needs_liggghts = pytest.mark.skipif(liggghts_executable() is None,
@@ -91,6 +92,15 @@ def test_decks_write_the_hidden_law_and_pour_the_hidden_sizes(tmp_path):
     assert len(radii) == 12 and min(radii) < 0.7 * stated.diameter[0] / 2 and max(radii) > 1.2 * stated.diameter[1] / 2
     assert wide.settings["lift_clearance_m"] == pytest.approx(stated.diameter[1])  # the stated protocol
     assert protocol.lift_clearance is None  # the protocol measures with the stated material
+
+
+def test_the_poured_mass_is_read_from_the_log():
+    log = ("INFO: Particle insertion pour: inserted 91 particle templates (mass 2.521766e+00) at step 1\n"
+           " - a total of 91 particle templates (mass 2.521766e+00) inserted so far.\n"
+           "WARNING: Particle insertion: Less insertions than requested (./src/fix_insert.cpp:814)\n"
+           " - a total of 959 particle templates (mass 2.698556e+01) inserted so far.\n")
+    assert poured_amount(log) == {"particles": 959, "mass_kg": 26.98556, "short_insertions": 1}
+    assert poured_amount("no insertion") == {}
 
 
 def _record(exp: str, cond: str, fill: int, obs: dict, status: str = "ok", error: str | None = None) -> dict:
@@ -172,6 +182,9 @@ def test_two_hidden_effects_are_right_only_when_both_are_added_in_either_order(t
         assert row["found"] and row["rule"] == "added" and row["hidden"] == "cohesion+rolling_resistance"
     for added in (["rolling_resistance"], ["rolling_resistance", "shape"], []):
         assert not _score(tmp_path, "rolling_cohesion", _diagnosis(added, False, "...", BOTH))["found"]
+    # the right effects added but disowned ("none of the candidates explains these measurements") is wrong
+    assert not _score(tmp_path, "rolling_cohesion", _diagnosis(["rolling_resistance", "cohesion"], False, "None of ...",
+                                                               BOTH, none_of_candidates=True))["found"]
     # one hidden effect: that effect added and nothing else
     assert _score(tmp_path, "rolling", _diagnosis(["rolling_resistance"], False, "...", BOTH))["found"]
     assert not _score(tmp_path, "rolling", _diagnosis(["rolling_resistance", "cohesion"], False, "...", BOTH))["found"]
@@ -183,12 +196,16 @@ def test_an_effect_outside_the_candidates_is_right_only_when_the_diagnosis_names
     assert row["found"] and row["none_of_candidates"] == "headline" and row["hidden"] == "outside the candidates"
     row = _score(tmp_path, "wide_psd", _diagnosis([], False, "The base model ...", BOTH, none_of_candidates=True))
     assert row["found"] and row["none_of_candidates"] == "verdict field"
-    # the explicit field decides over the words; an added effect or an adequate base model is wrong
+    # studied and disowned: an effect added, then "none of the candidates explains these measurements"
+    row = _score(tmp_path, "wide_psd", _diagnosis(["shape"], False, "None of the candidate effects explains these "
+                                                  "measurements: ...", BOTH, none_of_candidates=True))
+    assert row["found"]
+    table = _scorer().markdown([row])
+    assert "shape (none of the candidates explains it)" in table and "outside the candidates" in table
+    # the explicit field decides over the words; an effect offered as the explanation or an adequate base is wrong
     assert not _score(tmp_path, "wide_psd", _diagnosis([], False, NONE_HEADLINE, BOTH, none_of_candidates=False))["found"]
     assert not _score(tmp_path, "wide_psd", _diagnosis(["shape"], False, "With shape added ...", BOTH))["found"]
     assert not _score(tmp_path, "wide_psd", _diagnosis([], True, "No effect is needed: ...", []))["found"]
-    table = _scorer().markdown([row])
-    assert "- (none of the candidates)" in table and "outside the candidates" in table
 
 
 # --------------------------------------------------------------------------- a real run
@@ -203,5 +220,7 @@ def test_tiny_lab_runs_liggghts_and_writes_the_three_files(tmp_path):
     assert truth["case"] == "base" and len(truth["runs"]) == 2 and truth["fill_mode"] == "poured"
     assert not list((tmp_path / "runs").rglob("*.dump"))  # measured, then deleted
     assert (tmp_path / "decks" / "base" / "baffle_9kg_fill7000.deck").exists()
+    poured = truth["materials"]["baffle"]
+    assert poured["fill_mass_kg"] == pytest.approx(9.0) and poured["poured_mass_kg"][0] > 0.99 * 9.0  # all poured
     cfg, _ = load_diagnosis_config(tmp_path / "diagnose_base.yaml")
     assert load_measurements(tmp_path / cfg.measurements) is not None

@@ -44,6 +44,7 @@ import datetime as _dt
 import json
 import math
 import platform
+import re
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -77,6 +78,9 @@ LAB_FILL_START = 7000
 MAX_FILLS = 100
 #: relative half-width of the wide size distribution of ``wide_psd`` (half-width / number-mean diameter)
 WIDE_PSD_HALF_WIDTH = 0.45
+#: solid volume poured per batch / insertion region volume: the harness's 0.15 left whole batches
+#: uninserted in the quick baffle box (27.0-27.3 of 28 kg poured), 0.10 pours the full mass
+POUR_BATCH_FRACTION = 0.10
 #: cohesion energy density [J/m^3] of the two-effect case: with mu_r = 0.15 and the one-effect
 #: case's 3e5 the quick-scale material did not flow (11 of 15 runs unmeasurable: the baffle box's
 #: fill stood as a block, the hollow cylinder lifted its fill, the drum's bed slid as a plug), so a
@@ -235,7 +239,9 @@ def lab_deck(run: LabRun, scale: str, fill_mode: str = "poured", dt: float | Non
         dt = warpdem_time_step(lab, fill_for_index(lab, run.fill_index))
     params = case.contact_parameters()
     deck = write_deck(lab, params, fill_mode=fill_mode, fill_index=run.fill_index, dt=dt,
-                      rpm=run.settings.get("rpm"), size_classes=case.size_classes)
+                      rpm=run.settings.get("rpm"), size_classes=case.size_classes,
+                      pour_batch_fraction=POUR_BATCH_FRACTION)
+    deck.settings["fill_mass_kg"] = float(lab.fill_amount(lab.bulk_material())["mass"])
     return protocol, deck
 
 
@@ -243,8 +249,10 @@ def _run_one(run: LabRun, protocol: Experiment, deck: ExperimentDeck, keep_dumps
              timeout_s: float) -> dict[str, Any]:
     """Run one deck and measure it -> its record (a failed LIGGGHTS run is a record with status "failed")."""
     t0 = time.perf_counter()
+    poured: dict[str, Any] = {}
     try:
-        m, _ = run_and_measure(protocol, deck, run.folder, timeout_s=timeout_s)
+        m, finished = run_and_measure(protocol, deck, run.folder, timeout_s=timeout_s)
+        poured = poured_amount(finished.log)
     except Exception as exc:  # noqa: BLE001 - one run failed (error, time-out, unreadable dump): recorded, the rest go on
         m = LiggghtsMeasurement(run.experiment, "failed", f"LIGGGHTS run failed: {type(exc).__name__}: {exc}"[:2000],
                                 {k: None for k in protocol.OBSERVABLES})
@@ -258,15 +266,37 @@ def _run_one(run: LabRun, protocol: Experiment, deck: ExperimentDeck, keep_dumps
                                   "particles_final", "lost_atoms_warnings", "timestep_warnings", "h_fill_m",
                                   "peak_height_m", "mean_diameter_m", "no_pile", "snapshot_std_deg",
                                   "skipped_snapshots") if k in d}
+    if poured and deck.fill_mode == "poured":
+        keep["poured_mass_kg"] = poured["mass_kg"]
+        keep["poured_particles"] = poured["particles"]
+        keep["fill_mass_kg"] = deck.settings.get("fill_mass_kg")
+        keep["short_insertions"] = poured["short_insertions"]
     return {"case": run.case, "experiment": run.experiment, "condition": run.condition, "settings": run.settings,
             "fill_index": run.fill_index, "status": m.status, "error": m.error, "observables": m.observables,
             "diagnostics": keep, "wall_s": m.timing.get("wall_s"), "dt_s": deck.dt, "n_particles_deck": deck.n_particles,
             "folder": str(run.folder)}
 
 
+_INSERTED = re.compile(r"a total of (\d+) particle templates \(mass ([0-9.eE+-]+)\) inserted so far")
+
+
+def poured_amount(log: str) -> dict[str, Any]:
+    """What LIGGGHTS poured, from its log: particles and mass [kg] inserted in all, and how many
+    batches it could not insert whole ("Less insertions than requested"); {} when nothing was poured."""
+    found = _INSERTED.findall(log)
+    if not found:
+        return {}
+    n, mass = found[-1]
+    return {"particles": int(n), "mass_kg": float(mass),
+            "short_insertions": log.count("Less insertions than requested")}
+
+
 # --------------------------------------------------------------------------- the three files
-def lab_document(records: list[dict[str, Any]], scale: str, observables: Mapping[str, Mapping[str, str]]
-                 ) -> dict[str, Any]:
+#: how the lab file words each fill mode
+FILL_WORDS = {"poured": "poured fills", "identical": "started from warpdem's own loose fills"}
+
+def lab_document(records: list[dict[str, Any]], scale: str, observables: Mapping[str, Mapping[str, str]],
+                 fill_mode: str = "poured") -> dict[str, Any]:
     """The v2 measurement file of one case's run records (a condition needs 2 measured repeats).
     Nothing in it names the case or the hidden model: failures are given as "not measurable" with
     the measurement's reason (a failed LIGGGHTS run as "the run failed")."""
@@ -293,8 +323,8 @@ def lab_document(records: list[dict[str, Any]], scale: str, observables: Mapping
                 "settings": dict(settings), "observables": _observables(dict(observables[exp_name]), measured)}
     doc: dict[str, Any] = {
         "format": "warpdem-measurements/2", "title": f"lab data ({scale} scale)",
-        "source": "validation/reference/liggghts_labs.py: LIGGGHTS-PUBLIC as the lab, poured fills, measured by "
-                  "calibration.measurement; the hidden model is in truth_*.json",
+        "source": f"validation/reference/liggghts_labs.py: LIGGGHTS-PUBLIC as the lab, {FILL_WORDS[fill_mode]}, "
+                  "measured by calibration.measurement; the hidden model is in truth_*.json",
         "experiments": experiments}
     mat = lab_material(scale)
     if mat is not None:
@@ -319,8 +349,14 @@ def truth_document(case: str, records: list[dict[str, Any]], scale: str, fills: 
     for exp_name in conditions(scale):
         stated = _stated_material(exp_name, scale)
         true = case_material(spec, stated)
+        masses = [r["diagnostics"]["poured_mass_kg"] for r in records
+                  if r["experiment"] == exp_name and "poured_mass_kg" in r.get("diagnostics", {})]
+        targets = {r["diagnostics"].get("fill_mass_kg") for r in records
+                   if r["experiment"] == exp_name and "poured_mass_kg" in r.get("diagnostics", {})}
         materials[exp_name] = {"stated_diameter_m": list(stated.diameter), "lab_diameter_m": list(true.diameter),
-                               "size_classes": spec.size_classes}
+                               "size_classes": spec.size_classes,
+                               "poured_mass_kg": [min(masses), max(masses)] if masses else None,
+                               "fill_mass_kg": sorted(targets)[0] if len(targets) == 1 else sorted(targets) or None}
     return {
         "format": "warpdem-liggghts-lab-truth/1", "case": case, "words": spec.words,
         "hidden": {"law": dict(spec.law), "parameters": dict(spec.parameters), "psd_half_width": spec.psd_half_width},
@@ -398,7 +434,8 @@ def generate_labs(cases: list[str], out: Path, scale: str = "quick", fills: int 
         for run in first.values():
             if (run.folder / "in.deck").exists():
                 shutil.copyfile(run.folder / "in.deck", deck_copies / f"{run.experiment}_{run.condition}_fill{run.fill_index}.deck")
-        write_atomic(out / f"lab_{case}.yaml", yaml.safe_dump(lab_document(records, scale, observables), sort_keys=False))
+        write_atomic(out / f"lab_{case}.yaml", yaml.safe_dump(lab_document(records, scale, observables, fill_mode),
+                                                               sort_keys=False))
         truth = truth_document(case, records, scale, fills, fill_mode, runs_dir, elapsed, version)
         truth["deck_copies"] = str(deck_copies)
         write_atomic(out / f"truth_{case}.json", json.dumps(truth, indent=1, default=str))
