@@ -276,7 +276,7 @@ def test_indistinguishable_says_so_and_lists_what_each_predicts():
         for n in ("effect_a", "effect_b"):
             assert f"{WORDS[n]} predicts {f.means[n]:.3g} ± {f.sds[n]:.2g} deg" in d.sentence
     assert f"at the {d.forecasts[3].proposal.name}," not in d.sentence
-    assert "1 more proposed condition was not forecast" in d.sentence
+    assert "1 more proposal was not forecast" in d.sentence
     assert d.to_dict()["not_forecast"] == list(model.proposals_not_forecast)
 
 

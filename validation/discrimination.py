@@ -143,7 +143,7 @@ def _left_out(not_forecast: Sequence[str]) -> str:
     if not not_forecast:
         return ""
     n = len(not_forecast)
-    return (f" {n} more proposed condition{'s were' if n > 1 else ' was'} not forecast (beyond "
+    return (f" {n} more proposal{'s were' if n > 1 else ' was'} not forecast (beyond "
             "max_proposed_conditions, not simulable, or too few DEM runs measured it; diagnosis.json lists "
             "them under not_forecast).")
 

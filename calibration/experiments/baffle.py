@@ -57,8 +57,9 @@ class BaffleBox(Experiment):
     LAB_EFFORT: ClassVar[LabEffort] = LabEffort(
         0.5, 4.0, "a repeat: weigh, fill and level, lift, photograph, sweep up; set-up: a box with a lifting baffle")
     LAB_SETTINGS: ClassVar[tuple[LabSetting, ...]] = (
-        LabSetting("fill_mass", "fill mass", "kg", (0.5, 1.5), 0.1, 0.5,
-                   "weigh another fill; cohesion weighs more against gravity in a lower heap"),
+        LabSetting("fill_mass", "fill mass", "kg", (1.5, 0.5), 0.1, 0.5,
+                   "weigh another fill; a taller heap has a longer slope, in a lower one cohesion weighs more "
+                   "against gravity (but a coarse fill may leave too short a slope to measure)"),
         LabSetting("lift_speed", "baffle lift speed", "m/s", (2.0, 0.5), 0.25, 0.5,
                    "set the drive to another speed; a faster lift lets the heap flow before it stops"),
         LabSetting("box_width", "box width", "m", (1.5,), 4.0, 0.5,
