@@ -254,14 +254,18 @@ def _ranking_sections(result: "DiagnosisResult", r, i: int, figure_paths: Mappin
         d = r.discrimination
         words = {c.name: c.effect.words for c in r.candidates}
         frows = [[f.proposal.name, f.proposal.unit] + [f"{f.means[n]:.4g} ± {f.sds[n]:.2g}" for n in d.candidates]
-                 + [round(f.measurement_sd, 3), Cell(round(f.separation, 2), "good" if f.separation >= d.threshold else "")]
+                 + [round(f.measurement_sd, 3), "" if f.lab_hours is None else f"{f.lab_hours:.2g}",
+                    Cell(round(f.separation, 2), "good" if f.separation >= d.threshold else ""),
+                    "" if f.lab_hours is None else round(f.separation_per_lab_hour, 2)]
                  for f in d.forecasts]
         sections.append(Section("What to measure next", [
             d.sentence,
             *([Table(["proposed measurement", "unit"] + [words[n] for n in d.candidates]
-                     + ["expected SE", "separation (σ)"], frows,
-                     caption="Predicted outcomes (posterior mean ± predictive sd) of each proposed measurement")]
+                     + ["expected SE", "lab hours", "separation (σ)", "σ per lab hour"], frows,
+                     caption=f"Predicted outcomes (posterior mean ± predictive sd) of each proposed measurement, "
+                             f"ranked: those reaching {d.threshold:g} σ by σ per lab hour, then by separation")]
               if frows else []),
+            *(["Not forecast: " + "; ".join(d.not_forecast)] if d.not_forecast else []),
             *_fig(figure_paths, "discrimination" + suffix, "Predictions of the tied candidates at the best "
                                                            "proposed conditions."),
         ]))
