@@ -37,12 +37,16 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Optional, Any, Literal, Union
+from typing import Annotated, Optional, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, NonNegativeFloat, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from warpdem import ConfigError
 from warpdem.config_io import check_device, load_config_file, parse_processes
+from warpdem.config_schema import Flag, Number, Pair, Text, WholeNumber
+
+#: a finite number >= 0
+NonNegativeNumber = Annotated[Number, Field(ge=0)]
 
 __all__ = ["DiagnosisConfig", "load_diagnosis_config", "format_validation_error"]
 
@@ -62,34 +66,34 @@ class ProposalSection(_Strict):
     quantity: str
     settings: dict[str, Any] = Field(default_factory=dict)
     label: str = ""
-    n_repeats: int = Field(3, ge=1)
-    expected_standard_error: float | None = Field(None, ge=0)
-    lab_hours: float | None = Field(None, gt=0)  # None: from the experiment's LAB_SETTINGS / LAB_EFFORT
+    n_repeats: WholeNumber = Field(3, ge=1)
+    expected_standard_error: Optional[Number] = Field(None, ge=0)
+    lab_hours: Optional[Number] = Field(None, gt=0)  # None: from the experiment's LAB_SETTINGS / LAB_EFFORT
 
 
 class DiagnosisSection(_Strict):
-    design_points_per_parameter: int = Field(8, ge=1)
-    min_design_points: int = Field(16, ge=4)
-    replicates: int = Field(2, ge=2)
-    replicated_fraction: float = Field(1.0, gt=0, le=1)
-    confirm_replicates: int = Field(3, ge=1)
-    confirm_extra_replicates: int = Field(2, ge=0)
-    refine_points: int = Field(8, ge=0)
-    max_refine_waves: int = Field(5, ge=0)
-    scan_points: int = Field(2 ** 14, ge=64)
-    evidence_samples: int = Field(2 ** 13, ge=256)
-    cutoff: float = Field(3.0, gt=0)
-    within_sigma: float = Field(2.0, gt=0)
-    tie_log_bayes: float = Field(math.log(3.0), gt=0)
-    separation_sigma: float = Field(2.0, gt=0)
-    strong_log_bayes: float = Field(3.0, gt=0)
-    max_added_effects: int = Field(2, ge=0)
-    rank_when_adequate: bool = False
-    model_discrepancy: Union[Literal["fidelity", "none"], dict[str, NonNegativeFloat]] = "fidelity"
-    max_conflict_size: int = Field(3, ge=1)
-    gp_restarts: int = Field(2, ge=0)
-    cv_folds: int = Field(5, ge=2)
-    seed: int = Field(0, ge=0)
+    design_points_per_parameter: WholeNumber = Field(8, ge=1)
+    min_design_points: WholeNumber = Field(16, ge=4)
+    replicates: WholeNumber = Field(2, ge=2)
+    replicated_fraction: Number = Field(1.0, gt=0, le=1)
+    confirm_replicates: WholeNumber = Field(3, ge=1)
+    confirm_extra_replicates: WholeNumber = Field(2, ge=0)
+    refine_points: WholeNumber = Field(8, ge=0)
+    max_refine_waves: WholeNumber = Field(5, ge=0)
+    scan_points: WholeNumber = Field(2 ** 14, ge=64)
+    evidence_samples: WholeNumber = Field(2 ** 13, ge=256)
+    cutoff: Number = Field(3.0, gt=0)
+    within_sigma: Number = Field(2.0, gt=0)
+    tie_log_bayes: Number = Field(math.log(3.0), gt=0)
+    separation_sigma: Number = Field(2.0, gt=0)
+    strong_log_bayes: Number = Field(3.0, gt=0)
+    max_added_effects: WholeNumber = Field(2, ge=0)
+    rank_when_adequate: Flag = False
+    model_discrepancy: Union[Literal["fidelity", "none"], dict[str, NonNegativeNumber]] = "fidelity"
+    max_conflict_size: WholeNumber = Field(3, ge=1)
+    gp_restarts: WholeNumber = Field(2, ge=0)
+    cv_folds: WholeNumber = Field(5, ge=2)
+    seed: WholeNumber = Field(0, ge=0)
     designs_up_front: Union[bool, Literal["auto"]] = "auto"
 
     @field_validator("designs_up_front", mode="before")
@@ -105,8 +109,8 @@ class DiagnosisSection(_Strict):
 class DiagnosisConfig(_Strict):
     """The whole diagnosis config; see the module docstring."""
 
-    name: str = "diagnosis"
-    measurements: str
+    name: Text = "diagnosis"
+    measurements: Text
     output: str | None = None
     device: str | None = None
     processes: Union[int, Literal["auto"]] = "auto"
@@ -114,16 +118,16 @@ class DiagnosisConfig(_Strict):
     scale: Literal["paper", "quick"] = "paper"
     experiments: dict[Literal["baffle", "drum", "cylinder"], dict[str, Any]] = Field(default_factory=dict)
     model: ModelSection = Field(default_factory=ModelSection)
-    parameters: dict[str, tuple[float, float]]
-    fixed: dict[str, float] = Field(default_factory=dict)
+    parameters: dict[str, Pair]
+    fixed: dict[str, Number] = Field(default_factory=dict)
     candidates: Union[Literal["default"], list[str]] = "default"
-    effect_ranges: dict[str, tuple[float, float]] = Field(default_factory=dict)
+    effect_ranges: dict[str, Pair] = Field(default_factory=dict)
     add: list[str] = Field(default_factory=list)
     proposals: Union[Literal["auto", "none"], list[ProposalSection]] = "auto"
-    max_proposed_conditions: int = Field(6, ge=0)
+    max_proposed_conditions: WholeNumber = Field(6, ge=0)
     diagnosis: DiagnosisSection = Field(default_factory=DiagnosisSection)
     cache: str | None = None
-    progress: bool = True
+    progress: Flag = True
 
     @field_validator("processes", mode="before")
     @classmethod
