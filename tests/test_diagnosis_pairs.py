@@ -96,6 +96,9 @@ def test_a_choice_short_of_strong_evidence_is_provisional_and_names_what_would_d
     assert set(rnd.contenders) == {"rolling_resistance", "cohesion", "shape"} == set(rnd.discriminated)
     assert rnd.discrimination is not None and set(rnd.discrimination.candidates) == set(rnd.contenders)
     assert "provisional" in r.headline and "fits nearly as well" in r.headline
+    # a provisional choice never reads green: the verdict carries why
+    assert any("is provisional" in c for c in r.caveats)
     # the default (ln B 3) leaves a clear winner alone: no forecasts
     plain = diagnose(obs, BASE, [ROLLING, COHESION, SHAPE], AnalyticGranularModel(1, proposals=(DRUM_10, DRUM_60)), FAST)
     assert plain.rounds[0].contenders == () and plain.rounds[0].discrimination is None
+    assert not any("is provisional" in c for c in plain.caveats)

@@ -77,7 +77,7 @@ from .settings import DiagnosisSettings
 from .study import ModelStudy, confirm_study, local_noise_sentence, own_noise_sentence, refine_study, study_model
 
 __all__ = ["RankingRound", "DiagnosisResult", "Unreached", "unreached_observables", "diagnose", "planned_designs", "run_planned_designs",
-           "PlannedRun", "version_name", "data_cannot_tell", "CANNOT_TELL_PLAUSIBLE_SHARE"]
+           "PlannedRun", "version_name", "data_cannot_tell", "CANNOT_TELL_PLAUSIBLE_SHARE", "provisional_choice"]
 
 
 @dataclass(frozen=True)
@@ -656,6 +656,7 @@ def _diagnose(obs: Observations, base_space: ParameterSpace, cands: tuple[Candid
     cannot_tell = data_cannot_tell(base.adequacy) if len(versions) == 1 else None
     caveats = [cannot_tell] if cannot_tell else []
     caveats += [why for why in map(weak_choice, rounds) if why]
+    caveats += [why for why in map(provisional_choice, rounds) if why]
     model_error = tuple(resolve_model_discrepancy(settings.model_discrepancy, obs)[1])
     return DiagnosisResult(obs, settings, versions, rounds, history, met, headline, details, steps,
                            {**runner.to_dict(), "designs_up_front": up_front}, seconds, cands, caveats, model_error,
@@ -750,6 +751,27 @@ def weak_choice(rnd: RankingRound) -> str | None:
             f"(below {WEAK_CHOICE_LOG_BAYES:g}, short of 'strong' evidence) computed from surrogates whose "
             f"cross-validated R² is as low as {r2:.2f} ({key}): these measurements may not tell the two effects "
             f"apart; a measurement that separates them (proposals) or more design points would.")
+
+
+def provisional_choice(rnd: RankingRound) -> str | None:
+    """Why a ranking round's choice is provisional, or None: the effect was chosen from a tie or by a
+    margin short of strong evidence, and the proposed measurements were forecast to tell the
+    contenders apart (:attr:`RankingRound.discriminated`). Until one of them is measured the data do
+    not single the effect out, so the verdict is amber even when every observable is within 2 sigma.
+    Not for an effect the user added (``add``)."""
+    d = rnd.discrimination
+    if rnd.chosen is None or d is None or rnd.chosen not in d.candidates:
+        return None
+    words = {c.name: c.effect.words for c in rnd.candidates}
+    others = " and ".join(words[n] for n in d.candidates if n != rnd.chosen)
+    pick = next((f for f in d.forecasts if f.proposal.key == d.recommended), None)
+    if pick is not None:
+        return (f"The choice of {words[rnd.chosen]} is provisional: {others} fits these measurements about as well; "
+                f"measuring the {pick.proposal.name} would tell them apart (separation {pick.separation:.1f} sigma).")
+    best = max((f.separation for f in d.forecasts), default=float("nan"))
+    return (f"The choice of {words[rnd.chosen]} is provisional: {others} fits these measurements about as well, and "
+            f"none of the {len(d.forecasts)} proposed measurements would separate them (largest separation "
+            f"{best:.1f} sigma): with these experiments the two effects are indistinguishable.")
 
 
 def _single_fit_caveats(first, met: bool, within_sigma: float, unsettled: list[str], waves_words: str) -> str:
