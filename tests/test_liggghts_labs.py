@@ -15,6 +15,7 @@ import yaml
 
 from calibration.measurement.records import load_measurements
 from validation.config import load_diagnosis_config
+from warpdem.config_io import load_config_file
 from validation.hidden_effects import TRUE_FRICTION
 from validation.reference.liggghts import liggghts_executable
 from validation.reference.liggghts_labs import (CANDIDATES, LAB_CASES, LabRun, canonical_case, case_material,
@@ -148,6 +149,31 @@ def test_truth_and_diagnosis_configs(tmp_path):
     (tmp_path / "diagnose_rolling_cohesion.yaml").write_text(yaml.safe_dump(cfgs["rolling_cohesion"]))
     cfg, _ = load_diagnosis_config(tmp_path / "diagnose_rolling_cohesion.yaml")
     assert cfg.measurements == "lab_rolling_cohesion.yaml"
+
+
+
+def test_the_first_scale_is_the_readme_first_diagnosis(tmp_path):
+    """--scale first: the 9 kg baffle test and the 3 kg hollow cylinder of validation.hidden_effects'
+    "first", and diagnosis configs with first_diagnosis.yaml's small settings and cohesion range."""
+    runs = plan_runs(["base", "wide_psd"], "first", 3, tmp_path)
+    base = [r for r in runs if r.case == "base"]
+    assert len(base) == 6 and {(r.experiment, r.condition) for r in base} == {("baffle", "9kg"), ("cylinder", "3kg")}
+    assert next(r for r in base if r.experiment == "baffle").settings == {
+        "fill_mass": 9.0, "lift_to": 0.25, "max_time_after_lift": 1.5, "min_bins": 2}
+    protocol, deck = lab_deck(next(r for r in base if r.experiment == "cylinder"), "first", dt=1e-4)
+    assert protocol.fill_mass == 3.0 and deck.settings["fill_mass_kg"] == pytest.approx(3.0)
+    first = load_config_file(ROOT / "validation" / "configs" / "first_diagnosis.yaml", "diagnosis config")
+    cfgs = {c: lab_diagnosis_config(c, "first", tmp_path) for c in LAB_CASES}
+    keyed = {c: {k: v for k, v in cfg.items() if k not in ("name", "measurements", "output")} for c, cfg in cfgs.items()}
+    assert all(k == keyed["base"] for k in keyed.values())
+    cfg = cfgs["base"]
+    assert cfg["diagnosis"] == {**first["diagnosis"], "max_added_effects": 2}
+    assert cfg["effect_ranges"] == first["effect_ranges"] and cfg["scale"] == first["scale"] == "quick"
+    assert cfg["parameters"] == first["parameters"] and cfg["fixed"] == first["fixed"]
+    assert cfg["candidates"] == list(CANDIDATES) and cfg["cache"] == "dem_cache.jsonl"
+    (tmp_path / "diagnose_base.yaml").write_text(yaml.safe_dump(cfg))
+    loaded, _ = load_diagnosis_config(tmp_path / "diagnose_base.yaml")
+    assert loaded.measurements == "lab_base.yaml"
 
 
 # --------------------------------------------------------------------------- scoring

@@ -2,6 +2,9 @@
 
     python -m validation.reference.liggghts_labs --out docs/results/liggghts_labs_quick --scale quick \\
         --cases base rolling cohesion rolling+cohesion wide_psd --fills 3 --jobs 2
+    python -m validation.reference.liggghts_labs --out docs/results/liggghts_labs_first --scale first \\
+        --cases base rolling cohesion rolling+cohesion wide_psd --fills 3 --jobs 2   # ~80 s on 2 cores
+    warpdem diagnose docs/results/liggghts_labs_first/diagnose_*.yaml    # all five in one process (CPU)
 
 :mod:`validation.hidden_effects` lets warpdem play the lab; here LIGGGHTS-PUBLIC 3.8 does, through
 the fidelity harness (:mod:`validation.reference.liggghts_experiments` writes the deck of each
@@ -24,6 +27,14 @@ The true sliding frictions are :data:`validation.hidden_effects.TRUE_FRICTION`, 
 each experiment's default (0.6, as the diagnosis config fixes it). Per case it writes, mirroring
 :mod:`validation.hidden_effects` (same conditions per scale, reading resolutions and
 diagnosis config, with room for two added effects):
+
+Scales (:func:`validation.hidden_effects.conditions`): ``quick`` (the quick presets, 7 observables:
+baffle test, drum at 15/30/45 rpm, hollow cylinder; its diagnosis is for a GPU) and ``first`` (the
+README's first diagnosis on 2 CPU cores: a 9 kg baffle test of the quick 24-30 mm spheres, static
+angle and bulk density, and a 3 kg quick hollow cylinder, pile angle and pile height; the diagnosis
+config takes the small ``diagnosis:`` settings of ``validation/configs/first_diagnosis.yaml`` and its
+cohesion range, with the three :data:`CANDIDATES`); ``tiny`` (the 9 kg baffle test alone, a smoke
+test) and ``paper`` as there.
 
 - ``lab_<case>.yaml``: the measurement file (``warpdem-measurements/2``; a neutral title and source,
   nothing that names the case), the ONLY file a diagnosis reads;
@@ -374,8 +385,9 @@ def truth_document(case: str, records: list[dict[str, Any]], scale: str, fills: 
 
 def lab_diagnosis_config(case: str, scale: str, out: Path) -> dict[str, Any]:
     """The diagnosis config of one case: :func:`validation.hidden_effects.diagnosis_config` (the base
-    model, sliding frictions calibrated), the three candidates named, and room for two added effects
-    (every case gets the same settings: the diagnosis must not know which case it reads)."""
+    model, sliding frictions calibrated; at ``first`` its small ``diagnosis:`` settings, those of
+    ``validation/configs/first_diagnosis.yaml``), the three candidates named, and room for two added
+    effects (every case gets the same settings: the diagnosis must not know which case it reads)."""
     cfg = diagnosis_config(case, scale)
     cfg["name"] = f"liggghts-lab-{case}"
     cfg["output"] = str(out / f"diagnosis_{case}")
@@ -479,7 +491,9 @@ def means_table(out: Path, cases: list[str]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, help="folder for lab_/diagnose_/truth_<case> files")
-    ap.add_argument("--scale", default="quick", choices=["quick", "first", "tiny", "paper"])
+    ap.add_argument("--scale", default="quick", choices=["quick", "first", "tiny", "paper"],
+                    help="quick: 7 observables (diagnose on a GPU); first: a 9 kg baffle test and a 3 kg hollow "
+                         "cylinder, 4 observables (diagnose on 2 CPU cores); tiny: the baffle test alone")
     ap.add_argument("--cases", nargs="+", default=list(LAB_CASES), metavar="CASE",
                     help=f"cases (default all): {', '.join(LAB_CASES)} (rolling+cohesion = rolling_cohesion)")
     ap.add_argument("--fills", type=int, default=3, help="repeats (poured fills) per condition, >= 2")
