@@ -151,7 +151,6 @@ def test_truth_and_diagnosis_configs(tmp_path):
     assert cfg.measurements == "lab_rolling_cohesion.yaml"
 
 
-
 def test_the_first_scale_is_the_readme_first_diagnosis(tmp_path):
     """--scale first: the 9 kg baffle test and the 3 kg hollow cylinder of validation.hidden_effects'
     "first", and diagnosis configs with first_diagnosis.yaml's small settings and cohesion range."""
