@@ -2,9 +2,9 @@
 
     python examples/pour_box.py [--spheres 20000 --device cuda --out out/pour]
 
-The job lives in :mod:`warpdem.pour_demo` so that ``warpdem pour`` works from an installed wheel.
+The job lives in :mod:`calibration.pour_demo` so that ``warpdem pour`` works from an installed wheel.
 """
-from warpdem.pour_demo import main
+from calibration.pour_demo import main
 
 if __name__ == "__main__":
     main()

@@ -1,5 +1,5 @@
 """The strict schema of a pump config (``warpdem pump CONFIG``), every section checked at load
-before any model is built (:func:`pump.run.load_config`).
+before any model is built (:func:`load_config`, also importable from :mod:`pump.run`).
 
 The sections' types and ranges are declared here (an unknown key, ``seed: 1.5``,
 ``fluid.density: heavy`` or ``coupling.two_way: "yes"`` is refused naming it); what depends on
@@ -18,12 +18,12 @@ from pydantic import Field
 
 from warpdem import ConfigError
 from warpdem.config_io import check_sphere_memory
-from warpdem.config_schema import Flag, Number, Section, Text, WholeNumber, dataclass_section
+from warpdem.config_schema import Flag, Number, Section, Text, WholeNumber, dataclass_section, raise_problems, validate_section
 
 from .design import PumpDesign
 from .geometry import COMPONENTS
 
-__all__ = ["PumpFile", "cross_section_problems", "MAX_STEPS", "MAX_GRID_POINTS", "MAX_PARTICLES_PER_WORLD"]
+__all__ = ["PumpFile", "cross_section_problems", "load_config", "DEFAULTS", "SECTIONS", "MAX_STEPS", "MAX_GRID_POINTS", "MAX_PARTICLES_PER_WORLD"]
 
 #: the most DEM steps a run may take (about 200 times the paper case's): a time step or revolution
 #: count that needs more is refused at load
@@ -234,3 +234,42 @@ def cross_section_problems(cfg: Mapping[str, Any]) -> list[str]:
             problems.append(str(exc))
     return problems
 
+
+SECTIONS = tuple(PumpFile.model_fields)
+#: each section's defaults (what a config that leaves a key out runs with)
+DEFAULTS = {name: PumpFile.model_fields[name].default_factory().model_dump()
+            for name in ("geometry", "fluid", "coupling", "particles", "wall", "run", "wear")}
+DEFAULTS["contact"] = dict(CONTACT_DEFAULTS)
+
+
+def load_config(path_or_dict: str | Path | dict, where: str | None = None) -> dict:
+    """Read and check a pump config (YAML path or mapping) against its schema
+    (:class:`pump.config_schema.PumpFile`) and the rules between its sections; returns plain
+    sections with the defaults filled in. Every problem is listed in one ConfigError naming
+    ``where`` (the file a mapping came from) and each key."""
+    if isinstance(path_or_dict, dict):
+        raw = dict(path_or_dict)
+        where = where or "config"
+    else:
+        from warpdem.config_io import load_config_file
+
+        p = Path(path_or_dict)
+        raw = load_config_file(p, "pump config")
+        if raw is None:
+            raise ConfigError(f"{p}: the file is empty; a pump config names at least its output and run "
+                              "(pump/configs/quick_pump.yaml)")
+        where = str(p)
+    doc = validate_section(PumpFile, raw, where)
+    cfg = doc.model_dump()
+    cfg["design"] = doc.design.model_dump(exclude_unset=True)  # PumpDesign keeps its own defaults
+    cfg["contact"] = {**CONTACT_DEFAULTS, **doc.contact}
+    cfg["gravity"] = list(doc.gravity)
+    problems = []
+    try:
+        from warpdem.config_io import check_device
+
+        check_device(cfg["device"], "device", present=False)  # a GPU config loads anywhere; pump_main runs it
+    except ConfigError as exc:
+        problems.append(str(exc))
+    raise_problems(where, problems + cross_section_problems(cfg))
+    return cfg

@@ -10,6 +10,7 @@ impacts, region, component, blade zone; :func:`wall_cell_data`).
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 from pathlib import Path
@@ -718,7 +719,7 @@ def _paper_needs(results: dict) -> str:
     needs = [n for n in needs if n is not None]
     import yaml
 
-    from .run import load_config
+    from .config_schema import load_config
 
     # the paper's config as data (its device, cuda, need not exist where this report is written)
     raw = yaml.safe_load((Path(__file__).parent / "configs" / "paper_pump.yaml").read_text())
@@ -965,10 +966,36 @@ def write_html(case, results: dict, figures: dict[str, Path], path: Path) -> Pat
     return path
 
 
+def save_json(path: Path, data: dict) -> None:
+    def conv(o):
+        if isinstance(o, (np.floating, np.integer)):
+            return o.item()
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, Path):
+            return str(o)
+        if isinstance(o, float) and not math.isfinite(o):
+            return None
+        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+    def finite(o):  # strict JSON: non-finite floats (an interval of one sample) become null
+        if isinstance(o, dict):
+            return {k: finite(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [finite(v) for v in o]
+        if isinstance(o, np.ndarray):
+            return finite(o.tolist())
+        if isinstance(o, (float, np.floating)) and not math.isfinite(float(o)):
+            return None
+        return o
+
+    from warpdem.config_io import write_atomic
+
+    write_atomic(path, json.dumps(finite(data), indent=1, default=conv, allow_nan=False))
+
+
 def write_outputs(case, rec, results: dict, out: Path) -> dict[str, Path]:
     """results.json, series.npz, wear surfaces, figures, report.md (+ report.html)."""
-    from .run import save_json
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     save_json(out / "results.json", results)

@@ -31,7 +31,6 @@ Config keys (SI units; every section optional except what a case needs):
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time as _time
@@ -41,52 +40,12 @@ from typing import Any
 
 import numpy as np
 
-from warpdem.config_schema import raise_problems, validate_section
 from warpdem.errors import ConfigError, WarpDEMError
 
-from .config_schema import CONTACT_DEFAULTS, MAX_STEPS, PumpFile, cross_section_problems  # noqa: F401 (MAX_STEPS)
+# the config (its schema, defaults and loader) lives in pump.config_schema; its names stay importable here
+from .config_schema import DEFAULTS, MAX_STEPS, SECTIONS, load_config  # noqa: F401 (DEFAULTS, MAX_STEPS, SECTIONS)
 from .design import PumpDesign
 from .geometry import COMPONENTS, REGIONS, PumpGeometry, blade_camber, build_pump, passage_clearances
-
-SECTIONS = tuple(PumpFile.model_fields)
-#: each section's defaults (what a config that leaves a key out runs with)
-DEFAULTS = {name: PumpFile.model_fields[name].default_factory().model_dump()
-            for name in ("geometry", "fluid", "coupling", "particles", "wall", "run", "wear")}
-DEFAULTS["contact"] = dict(CONTACT_DEFAULTS)
-
-
-def load_config(path_or_dict: str | Path | dict, where: str | None = None) -> dict:
-    """Read and check a pump config (YAML path or mapping) against its schema
-    (:class:`pump.config_schema.PumpFile`) and the rules between its sections; returns plain
-    sections with the defaults filled in. Every problem is listed in one ConfigError naming
-    ``where`` (the file a mapping came from) and each key."""
-    if isinstance(path_or_dict, dict):
-        raw = dict(path_or_dict)
-        where = where or "config"
-    else:
-        from warpdem.config_io import load_config_file
-
-        p = Path(path_or_dict)
-        raw = load_config_file(p, "pump config")
-        if raw is None:
-            raise ConfigError(f"{p}: the file is empty; a pump config names at least its output and run "
-                              "(pump/configs/quick_pump.yaml)")
-        where = str(p)
-    doc = validate_section(PumpFile, raw, where)
-    cfg = doc.model_dump()
-    cfg["design"] = doc.design.model_dump(exclude_unset=True)  # PumpDesign keeps its own defaults
-    cfg["contact"] = {**CONTACT_DEFAULTS, **doc.contact}
-    cfg["gravity"] = list(doc.gravity)
-    problems = []
-    try:
-        from warpdem.config_io import check_device
-
-        check_device(cfg["device"], "device", present=False)  # a GPU config loads anywhere; pump_main runs it
-    except ConfigError as exc:
-        problems.append(str(exc))
-    raise_problems(where, problems + cross_section_problems(cfg))
-    return cfg
-
 
 # ----------------------------------------------------------------------------- the case
 @dataclass
@@ -492,34 +451,6 @@ def fluid_coupling_summary(fluid) -> dict:
         out.update(relaxation=fluid.relaxation, max_cell_velocity_change_m_s=float(np.linalg.norm(du, axis=-1).max()),
                    cells_changed=int((np.linalg.norm(du, axis=-1) > 1e-6).sum()))
     return out
-
-
-def save_json(path: Path, data: dict) -> None:
-    def conv(o):
-        if isinstance(o, (np.floating, np.integer)):
-            return o.item()
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-        if isinstance(o, Path):
-            return str(o)
-        if isinstance(o, float) and not math.isfinite(o):
-            return None
-        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-    def finite(o):  # strict JSON: non-finite floats (an interval of one sample) become null
-        if isinstance(o, dict):
-            return {k: finite(v) for k, v in o.items()}
-        if isinstance(o, (list, tuple)):
-            return [finite(v) for v in o]
-        if isinstance(o, np.ndarray):
-            return finite(o.tolist())
-        if isinstance(o, (float, np.floating)) and not math.isfinite(float(o)):
-            return None
-        return o
-
-    from warpdem.config_io import write_atomic
-
-    write_atomic(path, json.dumps(finite(data), indent=1, default=conv, allow_nan=False))
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ from scipy import stats
 from calibration.designs import Parameter, ParameterSpace
 from validation import (CandidateEffect, DiagnosisSettings, EffectParameter, ErrorHistory, ForwardModel,
                         ForwardRunner, Misfit, Observable, Observations, ProposedMeasurement, diagnose, discriminate,
-                        estimate_log_evidence, minimal_conflicts, pooled_noise_sd)
+                        estimate_log_evidence, minimal_conflicts, pooled_noise_sd, write_diagnosis)
 from validation.diagnose import RankingRound, _break_tie
 from validation.ranking import CandidateResult
 from validation.search import evaluate_points
@@ -389,7 +389,7 @@ def _chromium() -> str | None:
 
 
 def test_write_json_figures_and_report(tie, tmp_path):
-    paths = tie.write(tmp_path / "diag")
+    paths = write_diagnosis(tie, tmp_path / "diag")
     for name in ("json", "error_history_json", "comparison", "residuals", "signatures", "discrimination",
                  "error_history", "report"):
         assert paths[name].is_file() and paths[name].stat().st_size > 0, name

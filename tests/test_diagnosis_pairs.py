@@ -16,7 +16,7 @@ import pytest
 
 from tests.test_diagnosis_logic import (BASE, COHESION, FAST, KEYS, ROLLING, SHAPE, AnalyticGranularModel,
                                         lab_observables)
-from validation import DiagnosisSettings, Observable, diagnose
+from validation import DiagnosisSettings, Observable, diagnose, write_diagnosis
 
 PAIR_TRUTH = {"mu_s_pp": 0.45, "mu_s_pw": 0.4, "mu_r": 0.1, "cohesion_energy_density": 2.0}
 
@@ -35,7 +35,7 @@ def test_two_hidden_effects_are_both_added_effect_by_effect(pair, tmp_path):
     assert [len(v.effects) for v in h] == [0, 1, 2]
     assert h[0].chi2 > h[1].chi2 > h[2].chi2
     assert len(pair.rounds) == 2 and pair.rounds[1].current.version.effect_names == (pair.added_effects[0],)
-    doc = json.loads(pair.write(tmp_path)["json"].read_text(encoding="utf-8"))
+    doc = json.loads(write_diagnosis(pair, tmp_path)["json"].read_text(encoding="utf-8"))
     assert doc["verdict"]["added_effects"] == list(pair.added_effects) and not doc["verdict"]["none_of_candidates"]
 
 
@@ -75,7 +75,7 @@ def test_an_effect_outside_the_candidates_is_called_so(outside, tmp_path):
     # it is not offered as the explanation
     assert not any(step.startswith("Enable ") for step in r.next_steps)
     assert any("beyond the candidates" in step for step in r.next_steps)
-    paths = r.write(tmp_path)
+    paths = write_diagnosis(r, tmp_path)
     doc = json.loads(paths["json"].read_text(encoding="utf-8"))
     assert doc["verdict"]["none_of_candidates"] and doc["verdict"]["unreached"][0]["key"] in KEYS
     html = paths["report"].read_text(encoding="utf-8")

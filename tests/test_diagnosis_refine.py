@@ -25,7 +25,7 @@ import pytest
 
 from calibration.designs import Parameter, ParameterSpace
 from validation import CandidateEffect, DiagnosisSettings, EffectParameter, ForwardModel, ForwardRunner, Observable
-from validation import diagnose
+from validation import diagnose, write_diagnosis
 from validation.design import evaluate_sets
 from validation.pooled import PooledForward, run_as_workers
 from validation.study import _maximin_subset, study_model
@@ -195,7 +195,7 @@ def test_waves_stop_at_the_limit_and_the_verdict_says_the_surrogate_still_disagr
 
 
 def test_report_lists_the_waves(looped, tmp_path):
-    html = looped.write(tmp_path / "diag")["report"].read_text()
+    html = write_diagnosis(looped, tmp_path / "diag")["report"].read_text()
     assert "History-matching waves" in html and "confirmation sets joined" in html
     assert json.loads((tmp_path / "diag" / "diagnosis.json").read_text())["verdict"]["surrogate_disagrees"] == []
 

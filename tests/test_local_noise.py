@@ -11,7 +11,7 @@ import numpy as np
 from scipy import stats
 
 from calibration.designs import Parameter, ParameterSpace
-from validation import ForwardModel, ForwardRunner, Misfit, Observable, diagnose
+from validation import ForwardModel, ForwardRunner, Misfit, Observable, diagnose, write_diagnosis
 from validation.effects import ModelVersion
 from validation.observables import Observations
 from validation.study import NOISE_TEST_ALPHA, confirm, local_noise, study_model
@@ -97,7 +97,7 @@ def test_the_verdict_and_the_report_say_where_the_confirmation_used_its_own_scat
     assert "drum angle at 45 rpm judged with the scatter of its own fills there" in result.headline
     said = [d for d in result.details if "scatter more than the pooled noise" in d]
     assert len(said) == 1 and "base + cohesion" in said[0] and "45" in said[0]
-    html = result.write(tmp_path / "diag")["report"].read_text()
+    html = write_diagnosis(result, tmp_path / "diag")["report"].read_text()
     assert html.count("scatter more than the pooled noise") == 1  # in the comparison section
 
 

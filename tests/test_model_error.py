@@ -18,7 +18,7 @@ import pytest
 
 from tests.test_diagnosis_logic import (BASE, COHESION, FAST, KEYS, ROLLING, SHAPE, AnalyticGranularModel,
                                         lab_observables)
-from validation import DiagnosisSettings, Misfit, Observable, Observations, diagnose
+from validation import DiagnosisSettings, Misfit, Observable, Observations, diagnose, write_diagnosis
 from validation.model_error import (FIDELITY_TABLE, build_table, collect_fidelity_cases, fidelity_table,
                                     resolve_model_discrepancy)
 
@@ -123,7 +123,7 @@ def test_model_error_keeps_a_code_bias_from_being_read_as_a_missing_effect(biase
     assert row["model_error_sd"] == 3.0 and row["dem_sigma_shares"]["model_error"] > 0.5
     terms = {t.key: t for t in with_error.model_error}
     assert terms["baffle/static_angle"].sd == 3.0 and terms["baffle/static_angle"].source == "set by the user"
-    paths = with_error.write(tmp_path)
+    paths = write_diagnosis(with_error, tmp_path)
     html = paths["report"].read_text(encoding="utf-8")
     assert "What each z is made of" in html and "set in the config" in html
     doc = json.loads(paths["json"].read_text(encoding="utf-8"))

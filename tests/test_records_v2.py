@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+from calibration.experiments import EXPERIMENTS
 from calibration.measurement import (
     FORMAT_V2,
     NO_PILE_LIMIT_DEG,
@@ -96,10 +97,10 @@ def test_example_loads_with_every_observable(example):
 
 
 def test_example_fits_the_registered_experiments(example):
-    check_settings(example)                      # names only
-    check_settings(example, build=True)          # every condition builds its experiment
-    load_measurements(EXAMPLE, experiments="registered")
-    assert unreported_observables(example) == ["baffle/lab/mass_left_in_box"]
+    check_settings(example, EXPERIMENTS)         # names only
+    check_settings(example, EXPERIMENTS, build=True)  # every condition builds its experiment
+    load_measurements(EXAMPLE, experiments=EXPERIMENTS)
+    assert unreported_observables(example, EXPERIMENTS) == ["baffle/lab/mass_left_in_box"]
 
 
 def test_v2_condition_stats_and_summary(example):
@@ -279,28 +280,28 @@ def test_settings_checked_against_experiments(tmp_path, raw):
     d["experiments"]["drums"] = d["experiments"].pop("drum")
     load_measurements(_write(tmp_path, d))      # names unchecked without a registry
     expect(d, "experiments.drums", "unknown experiment 'drums' (registered: baffle, cylinder, drum)",
-           experiments="registered")
+           experiments=EXPERIMENTS)
     d = copy.deepcopy(raw)
     d["experiments"]["drum"]["conditions"]["15rpm"]["settings"]["rmp"] = 15
-    expect(d, f"{K15}.settings.rmp", "unknown setting 'rmp' of experiment 'drum'", experiments="registered")
+    expect(d, f"{K15}.settings.rmp", "unknown setting 'rmp' of experiment 'drum'", experiments=EXPERIMENTS)
     d = copy.deepcopy(raw)
     d["experiments"]["drum"]["conditions"]["15rpm"]["settings"]["dt"] = 1e-5
-    expect(d, f"{K15}.settings.dt", "sets up the simulation", experiments="registered")
+    expect(d, f"{K15}.settings.dt", "sets up the simulation", experiments=EXPERIMENTS)
     d = copy.deepcopy(raw)
     d["experiments"]["cylinder"]["conditions"]["lab"]["settings"]["sections"] = 32
-    expect(d, f"{KCL}.settings.sections", "sets up the simulation", experiments="registered")
+    expect(d, f"{KCL}.settings.sections", "sets up the simulation", experiments=EXPERIMENTS)
     # a plain mapping of setting names
     expect(raw, f"{K15}.settings.diameter", "unknown setting 'diameter'",
            experiments={"drum": {"rpm"}, "baffle": set(), "cylinder": set()})
     # build: the experiment itself refuses a value
     d = copy.deepcopy(raw)
     d["experiments"]["drum"]["conditions"]["30rpm"]["settings"]["length"] = -0.15
-    load_measurements(_write(tmp_path, d), experiments="registered")   # the names are fine
-    expect(d, "experiments.drum.conditions.30rpm.settings", "refuses these settings", experiments="registered",
+    load_measurements(_write(tmp_path, d), experiments=EXPERIMENTS)   # the names are fine
+    expect(d, "experiments.drum.conditions.30rpm.settings", "refuses these settings", experiments=EXPERIMENTS,
            build=True)
     d = copy.deepcopy(raw)
     d["material"]["colour"] = "grey"
-    expect(d, "material", "cannot build this material", experiments="registered", build=True)
+    expect(d, "material", "cannot build this material", experiments=EXPERIMENTS, build=True)
 
 
 def test_unit_checked_against_what_the_experiment_reports():
@@ -327,7 +328,7 @@ def test_unit_checked_against_what_the_experiment_reports():
 def test_v1_still_loads_and_gives_observations():
     mf = load_measurements(TABLE_V1)
     assert mf.version == 1 and mf.material == {}
-    check_settings(mf)   # version 1: parameters are free notes, nothing to check
+    check_settings(mf, EXPERIMENTS)   # version 1: parameters are free notes, nothing to check
     recs = _by_key(mf.observations())
     assert list(recs) == ["baffle/lab/static_angle", "drum/rpm30/dynamic_angle", "cylinder/lab/pile_angle",
                           "cylinder/dem_optimum/pile_angle"]
@@ -338,7 +339,7 @@ def test_v1_still_loads_and_gives_observations():
     assert recs["cylinder/lab/pile_angle"].repeats == pytest.approx((31.13, 32.29, 34.70, 32.92, 31.61), abs=0.0101)
     assert recs["cylinder/dem_optimum/pile_angle"].origin == "simulation"
     assert all(r.unit == "deg" and r.n_censored == 0 for r in recs.values())
-    assert unreported_observables(mf) == []
+    assert unreported_observables(mf, EXPERIMENTS) == []
 
 
 def test_v1_two_experiments_of_one_kind_get_distinct_keys():

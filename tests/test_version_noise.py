@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from validation import ForwardRunner, Misfit, diagnose
+from validation import ForwardRunner, Misfit, diagnose, write_diagnosis
 from validation.effects import ModelVersion
 from validation.observables import Observations
 from validation.study import NOISE_TEST_ALPHA, study_model, version_noise
@@ -80,5 +80,5 @@ def test_the_verdict_and_the_report_say_where_a_version_keeps_its_own_noise(tmp_
     said = [d for d in result.details if "scatters differently" in d]
     assert len(said) == 1 and "static angle A" in said[0] and "base + cohesion" in said[0]
     assert "pile angle" not in said[0]  # the base model formed no pile: nothing to differ from
-    html = result.write(tmp_path / "diag")["report"].read_text()
+    html = write_diagnosis(result, tmp_path / "diag")["report"].read_text()
     assert html.count("scatters differently from fill to fill") == 1  # in the surrogates and DEM noise section

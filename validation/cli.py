@@ -255,6 +255,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
     _quiet_surrogate_fits()
     from .config import load_diagnosis_config
     from .diagnose import diagnose
+    from .report import write_diagnosis
 
     t0 = time.perf_counter()
     if args.prefetch is not None and len(args.config) > 1:
@@ -308,7 +309,7 @@ def diagnose_main(argv: Sequence[str] | None = None) -> int:
         return 2
     wall = round(time.perf_counter() - t0, 1)
     for (path, *_, out), result in zip(jobs, results):
-        paths = result.write(out)
+        paths = write_diagnosis(result, out)
         timing = {"wall_s": wall, "dem_s": round(forward.dem_seconds, 1), "dem_worlds_run": forward.dem_worlds,
                   "dem_launches": forward.log, "merged_requests": pool.merges,
                   "diagnoses_in_this_process": [str(j[0]) for j in jobs], "device": str(forward.device or "default"),

@@ -48,14 +48,11 @@ figures and the HTML report.
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -226,30 +223,6 @@ class DiagnosisResult:
             "error_history": self.history.to_dict(),
             "next_steps": self.next_steps, "forward_model": self.forward, "seconds": self.seconds,
         })
-
-    def write(self, folder: str | os.PathLike) -> dict[str, Path]:
-        """Write ``diagnosis.json``, ``error_history.json``, the figures (PNG) and ``report.html``."""
-        from warpdem.config_io import write_atomic
-
-        from .plots import diagnosis_figures
-        from .report import build_report
-
-        out = Path(folder)
-        out.mkdir(parents=True, exist_ok=True)
-        paths: dict[str, Path] = {}
-        paths["json"] = out / "diagnosis.json"
-        write_atomic(paths["json"], json.dumps(self.to_dict(), indent=1, allow_nan=False))
-        paths["error_history_json"] = self.history.write(out / "error_history.json")
-        figures = diagnosis_figures(self)
-        import matplotlib.pyplot as plt
-
-        for name, fig in figures.items():
-            p = out / f"{name}.png"
-            fig.savefig(p, dpi=110, bbox_inches="tight")
-            plt.close(fig)
-            paths[name] = p
-        paths["report"] = build_report(self, {n: paths[n] for n in figures}).write(out / "report.html")
-        return paths
 
 
 def _jsonable(obj: Any) -> Any:

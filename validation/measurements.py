@@ -117,14 +117,15 @@ def observations_from_file(mf: MeasurementFile, *, origins: Sequence[str] | None
 
 def load_observations(path: str | os.PathLike, *, origins: Sequence[str] | None = ("lab",),
                       default_resolution: float | Mapping[str, float] | None = None,
-                      experiments: Mapping[str, Any] | str | None = None, build: bool = False,
+                      experiments: Mapping[str, Any] | None = None, build: bool = False,
                       auto_label: bool = True, diagnostic_dir: str | os.PathLike | None = None) -> Observations:
     """Read a measurement file (version 1 or 2) as :class:`Observations`.
 
     origins: keep conditions of these origins ("lab" by default; a v1 file's reference
     simulations are left out); None keeps all. default_resolution: see
     :func:`observable_from_record`. experiments / build: check the file's experiment and setting
-    names (``"registered"`` or a mapping; see :func:`calibration.measurement.check_settings`).
+    names against a mapping (the registered experiments: ``calibration.experiments.EXPERIMENTS``;
+    see :func:`calibration.measurement.check_settings`).
     Raises :class:`MeasurementFileError` naming the file and the key.
     """
     mf = load_measurements(path, experiments=experiments, build=build)

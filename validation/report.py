@@ -2,24 +2,30 @@
 
 Reading order (issue 11): verdict, comparison table, where it fails, ranking with sentences,
 what to measure next, error history; then surrogate quality and the forward-model cost.
+:func:`write_diagnosis` writes a result's JSON, figures and this report into a folder (the result
+does not render itself: :mod:`validation.diagnose` stays below its report).
 """
 
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
 from calibration.reporting import Cell, Figure, Report, Section, Table, Verdict
+from warpdem.config_io import write_atomic
 
 from .evidence import bayes_factor_words
+from .plots import diagnosis_figures
 from .study import STALL_FRACTION, local_noise_sentence, own_noise_sentence
 
 if TYPE_CHECKING:  # pragma: no cover
     from .diagnose import DiagnosisResult
 
-__all__ = ["build_report"]
+__all__ = ["build_report", "write_diagnosis"]
 
 
 def _refinement_blocks(result, within: float, cutoff: float) -> list:
@@ -60,6 +66,28 @@ def _dem_cell(c, j: int) -> str:
 
 def _fig(paths: Mapping[str, os.PathLike], name: str, caption: str) -> list[Figure]:
     return [Figure.from_path(paths[name], caption, name.replace("_", " "))] if name in paths else []
+
+
+def write_diagnosis(result: "DiagnosisResult", folder: str | os.PathLike) -> dict[str, Path]:
+    """Write ``diagnosis.json``, ``error_history.json``, the figures (PNG) and ``report.html`` of
+    ``result`` into ``folder``; returns their paths by name (``json``, ``error_history_json``,
+    one per figure, ``report``)."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {}
+    paths["json"] = out / "diagnosis.json"
+    write_atomic(paths["json"], json.dumps(result.to_dict(), indent=1, allow_nan=False))
+    paths["error_history_json"] = result.history.write(out / "error_history.json")
+    figures = diagnosis_figures(result)
+    import matplotlib.pyplot as plt
+
+    for name, fig in figures.items():
+        p = out / f"{name}.png"
+        fig.savefig(p, dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        paths[name] = p
+    paths["report"] = build_report(result, {n: paths[n] for n in figures}).write(out / "report.html")
+    return paths
 
 
 def build_report(result: "DiagnosisResult", figure_paths: Mapping[str, str | os.PathLike]) -> Report:

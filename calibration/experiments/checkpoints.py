@@ -19,7 +19,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 
@@ -28,9 +28,27 @@ from warpdem import ConfigError
 
 from .results_json import jsonable
 
-if TYPE_CHECKING:
-    from .common import Experiment
-    from .run_context import RunContext
+
+class CheckpointedExperiment(Protocol):
+    """What a checkpoint slot reads of its experiment (an :class:`~.common.Experiment`)."""
+
+    name: str
+    scale: str
+    first_fill_index: int
+
+    def settings(self) -> dict[str, Any]: ...
+
+
+class ProtocolState(Protocol):
+    """What a checkpoint saves of a running protocol (a :class:`~.run_context.RunContext`)."""
+
+    sim: wd.Simulation
+    capacities: dict[str, Any]
+    retries: list
+    phases: dict[str, float]
+    diag: list[dict[str, Any]]
+    errors: list[str | None]
+    _done: list[dict[str, Any]]
 
 __all__ = ["CHECKPOINT_FORMAT", "BatchCheckpoints", "BatchCheckpoint", "clear_checkpoints", "decode_value",
            "encode_value"]
@@ -129,7 +147,7 @@ def _fsync_file(path: Path) -> None:
 class BatchCheckpoint:
     """One batch's checkpoint slot: the batch fingerprint, saving and loading."""
 
-    def __init__(self, options: BatchCheckpoints, experiment: "Experiment", identity: Mapping[str, Any]) -> None:
+    def __init__(self, options: BatchCheckpoints, experiment: CheckpointedExperiment, identity: Mapping[str, Any]) -> None:
         from ..campaign_records import code_version
 
         self.options = options
@@ -197,7 +215,7 @@ class BatchCheckpoint:
             return None
         return sim
 
-    def save(self, ctx: "RunContext", inner: Mapping[str, Any] | None) -> None:
+    def save(self, ctx: ProtocolState, inner: Mapping[str, Any] | None) -> None:
         """Save ``ctx``'s simulation and protocol state (atomically: the ``.npz`` under a new
         name, then the sidecar naming it replaces the old one; the old ``.npz`` is removed)."""
         from warpdem.io import save_checkpoint

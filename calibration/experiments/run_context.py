@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping, Protocol
 
 import numpy as np
 
@@ -17,16 +17,23 @@ from ..filling import FillResult, active_bodies, active_spheres, run_for
 from ..measurement import MeasurementError
 from .checkpoints import BatchCheckpoint, decode_value, encode_value
 
-if TYPE_CHECKING:
-    from .common import Experiment
+__all__ = ["ProtocolSettings", "RunContext"]
 
-__all__ = ["RunContext"]
+
+class ProtocolSettings(Protocol):
+    """What a run context reads of its experiment (an :class:`~.common.Experiment`): its name for
+    the progress lines and the settle and removal numerics."""
+
+    name: str
+    ke_per_particle: float
+    settle_check_interval: float
+    removal_interval: float
 
 
 class RunContext:
     """What a protocol needs during a run: the simulation, phase bookkeeping, read-backs."""
 
-    def __init__(self, experiment: "Experiment", sim: wd.Simulation, fills: list[FillResult],
+    def __init__(self, experiment: ProtocolSettings, sim: wd.Simulation, fills: list[FillResult],
                  progress: bool, checkpoint: BatchCheckpoint | None = None,
                  resume: Mapping[str, Any] | None = None, capacities: Mapping[str, Any] | None = None,
                  retries: list | None = None) -> None:

@@ -51,7 +51,6 @@ from .records import (
     measurements_v2_mapping,
     parse_measurements,
     protocol_settings,
-    registered_experiments,
     unreported_observables,
     write_measurements_v2,
 )
@@ -101,7 +100,6 @@ __all__ = [
     "ObservationRecord",
     "check_settings",
     "protocol_settings",
-    "registered_experiments",
     "unreported_observables",
     "measurements_v2_mapping",
     "write_measurements_v2",

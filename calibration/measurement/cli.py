@@ -246,11 +246,12 @@ def check_runnable_settings(mf: Any) -> None:
     """The settings of every condition of an experiment the DEM can run (version 2) checked as the
     diagnosis checks them: names among the experiment's settings, types, values (the experiment is
     built); other experiments' conditions are the lab's own (this command only measures them)."""
-    from .records import check_settings, registered_experiments
+    from ..experiments import EXPERIMENTS
+    from .records import check_settings
 
     if mf.version != 2:
         return
-    known = registered_experiments()
+    known = dict(EXPERIMENTS)
     specs = {name: known.get(name) or {k for c in exp.conditions.values() for k in c.settings}
              for name, exp in mf.experiments.items()}
     check_settings(mf, specs, build=True)

@@ -21,7 +21,9 @@ Loading validates everything and raises :class:`.errors.MeasurementFileError` na
 and the dotted key. :meth:`ConditionRecord.stats` gives the mean, sample standard deviation
 (ddof=1) and standard error of a condition's angle; :meth:`MeasurementFile.observations` gives
 one plain :class:`ObservationRecord` per experiment, condition and quantity for either version;
-:func:`check_settings` checks experiment and setting names against the registered experiments;
+:func:`check_settings` checks experiment and setting names against the experiments a simulation can
+run (given as a mapping, e.g. ``calibration.experiments.EXPERIMENTS``: this module sits below the
+experiments, which measure with this package);
 :func:`write_measurements_v2` writes records to a version-2 file that loads back identically.
 """
 
@@ -60,7 +62,6 @@ __all__ = [
     "parse_measurements",
     "check_settings",
     "protocol_settings",
-    "registered_experiments",
     "unreported_observables",
     "measurements_v2_mapping",
     "write_measurements_v2",
@@ -945,7 +946,7 @@ def _parse_v2(V: _V, d: dict) -> MeasurementFile:
 
 
 def parse_measurements(data: Any, *, file: str = "<mapping>", base_dir: str = ".",
-                       experiments: "Mapping[str, Any] | str | None" = None, build: bool = False) -> MeasurementFile:
+                       experiments: "Mapping[str, Any] | None" = None, build: bool = False) -> MeasurementFile:
     """Validate an already-parsed measurement mapping (see :func:`load_measurements`)."""
     V = _V(file, base_dir)
     if data is None:
@@ -956,7 +957,7 @@ def parse_measurements(data: Any, *, file: str = "<mapping>", base_dir: str = ".
     if d.get("format") == FORMAT_V2:
         mf = _parse_v2(V, d)
         if experiments is not None:
-            check_settings(mf, None if experiments == "registered" else experiments, build=build)
+            check_settings(mf, experiments, build=build)
         return mf
     V.keys(d, _TOP_KEYS, "", required=("experiments",))
     exps = V.mapping(d["experiments"], "experiments")
@@ -984,14 +985,14 @@ def parse_measurements(data: Any, *, file: str = "<mapping>", base_dir: str = ".
     )
 
 
-def load_measurements(path: str | os.PathLike, *, experiments: "Mapping[str, Any] | str | None" = None,
+def load_measurements(path: str | os.PathLike, *, experiments: "Mapping[str, Any] | None" = None,
                       build: bool = False) -> MeasurementFile:
     """Load and validate a measurement file (YAML; JSON if it ends in .json), version 1 or 2.
 
     Image and video paths are relative to the file's folder. Raises
     :class:`.errors.MeasurementFileError` naming the file and the key. ``experiments``: check a
-    version-2 file's experiment and setting names (``"registered"``: against the registered
-    experiments; or a mapping, see :func:`check_settings`; None: no check); ``build``: also
+    version-2 file's experiment and setting names against a mapping (the registered experiments:
+    ``calibration.experiments.EXPERIMENTS``; see :func:`check_settings`; None: no check); ``build``: also
     build every condition's experiment (see :func:`check_settings`).
     """
     from warpdem.config_io import DuplicateKeyError, parse_json, parse_yaml
@@ -1022,16 +1023,9 @@ def load_measurements(path: str | os.PathLike, *, experiments: "Mapping[str, Any
 
 
 # --------------------------------------------------------------------------- #
-# checks against the registered experiments (imported lazily: calibration.experiments
-# imports this package)
+# checks against the experiments a simulation can run (given by the caller: the experiments
+# measure with this package, so it cannot import them; calibration.experiments.EXPERIMENTS)
 # --------------------------------------------------------------------------- #
-def registered_experiments() -> dict[str, type]:
-    """The registered experiment classes by name (``calibration.experiments.EXPERIMENTS``)."""
-    from ..experiments import EXPERIMENTS
-
-    return dict(EXPERIMENTS)
-
-
 def protocol_settings(experiment: "type | Iterable[str]") -> frozenset[str]:
     """Setting names a condition may give: an experiment class's fields without the model and
     numerics (:data:`SIMULATION_SETTINGS`), or the given names as they are."""
@@ -1042,13 +1036,13 @@ def protocol_settings(experiment: "type | Iterable[str]") -> frozenset[str]:
     return frozenset(experiment)
 
 
-def check_settings(measurements: MeasurementFile, experiments: "Mapping[str, Any] | None" = None, *,
+def check_settings(measurements: MeasurementFile, experiments: "Mapping[str, Any]", *,
                    build: bool = False) -> None:
     """Check a version-2 file against the experiments a simulation can run.
 
     experiments: name -> experiment class (``field_names()``, ``OBSERVABLES``, ``from_config``)
-    or a set of setting names; None: :func:`registered_experiments`. Every experiment must be
-    one of them and every setting one of its :func:`protocol_settings`; an observable the class
+    or a set of setting names; the registered ones are ``calibration.experiments.EXPERIMENTS``.
+    Every experiment must be one of them and every setting one of its :func:`protocol_settings`; an observable the class
     reports must be in the unit it reports. ``build``: also build each condition's experiment
     (``from_config("paper", material=<file material>, **settings)``) so that a value the
     experiment refuses (e.g. a negative rpm) or a material it cannot build is reported here.
@@ -1057,7 +1051,6 @@ def check_settings(measurements: MeasurementFile, experiments: "Mapping[str, Any
     """
     if measurements.version == 1:
         return
-    experiments = registered_experiments() if experiments in (None, "registered") else experiments
     file = measurements.path
     if build and measurements.material:
         from ..materials import BulkMaterial
@@ -1097,12 +1090,11 @@ def check_settings(measurements: MeasurementFile, experiments: "Mapping[str, Any
                                                                        f"settings: {e}") from e
 
 
-def unreported_observables(measurements: MeasurementFile,
-                           experiments: "Mapping[str, Any] | None" = None) -> list[str]:
+def unreported_observables(measurements: MeasurementFile, experiments: "Mapping[str, Any]") -> list[str]:
     """Keys ("experiment/condition/quantity") of observables that no simulation of that experiment
     reports (not in its class's ``OBSERVABLES``; e.g. ``mass_left_in_box`` today). experiments:
-    name -> experiment class; None: :func:`registered_experiments`. Unknown experiments count."""
-    experiments = registered_experiments() if experiments in (None, "registered") else experiments
+    name -> experiment class (the registered ones: ``calibration.experiments.EXPERIMENTS``).
+    Unknown experiments count."""
     if measurements.version == 1:
         pairs = [(*V1_OBSERVABLES.get(e.kind, (en, "angle")), cn)
                  for en, e in measurements.experiments.items() for cn in e.conditions]

@@ -4,7 +4,8 @@
     python examples/pour_box.py --spheres 20000 --device cuda --out out/pour
 
 Writes VTK files (particles_*.vtp, wall_*.vtp) for ParaView and prints the angle of the
-slope left behind, measured as the baffle test defines it (spec A).
+slope left behind, measured as the baffle test defines it (spec A) with
+:mod:`calibration.measurement`; that is why the job lives here, not in the engine.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ from warpdem import geometry
 from warpdem.config_io import (check_output_folder, check_sphere_memory, device_arg, nonnegative_float_arg,
                                positive_int_arg)
 from warpdem.io import write_vtk
+
+from .measurement import baffle_static_angle, mean_surface_height
 
 
 def loose_fill(n: int, lower, upper, d: float, rng) -> np.ndarray:
@@ -87,8 +90,6 @@ def main(argv=None) -> dict:
 
     print(f"warpdem pour_box: {model.num_spheres} spheres on {device}, dt = {dt:.2e} s, {steps} steps", flush=True)
     t0 = time.perf_counter()
-    from calibration.measurement import baffle_static_angle, mean_surface_height
-
     r = model.host["sphere_radius"]
     dump(sim)
     n_pour = int(t_lift / dt)
