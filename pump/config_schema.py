@@ -47,6 +47,11 @@ class Fluid(Section):
     viscosity: Number = Field(1.002e-3, gt=0)
     grid_spacing: Number = Field(0.003, gt=0)
     drag: Literal["di_felice", "schiller_naumann"] = "di_felice"
+    # where the drag reads the fluid velocity: the centre, or the mean over the particle's sphere
+    # (Faxen, a^2/6 lap u) or volume (a^2/10 lap u) (pump/coupling.py)
+    drag_velocity: Literal["centre", "surface_average", "volume_average"] = "centre"
+    # rotation factor k of the side rooms' core, c_u = k omega r (pump/flow.py; 0.5 without leakage)
+    side_room_rotation: Number = Field(0.5, ge=0, le=1)
     added_mass: Number = 0.5
     pressure_gradient: Number = 1.0
     buoyancy: Number = 1.0

@@ -3,8 +3,9 @@ default; an optional two-way correction of the fluid velocity on the coarse grid
 
 :class:`GridFluidForces` is a registered body-force model (:mod:`warpdem.body_forces`), so it is
 compiled into the DEM step like a contact sub-model and captured in the CUDA graph with it.
-Per active body b (volume-equivalent diameter d, solid volume V, velocity v), with the fluid
-velocity u and acceleration Du/Dt trilinearly interpolated at the centre of mass:
+Per active body b (volume-equivalent diameter d = 2 a, solid volume V, velocity v), with the fluid
+velocity u and acceleration Du/Dt trilinearly interpolated at the centre of mass (the drag's u as
+``drag_velocity`` says, below):
 
 * Drag, ``drag="di_felice"`` (default; Di Felice 1994, as CFDEMcoupling):
   Re = rho_f d eps |u - v| / mu, C_d = (0.63 + 4.8 / sqrt(Re))^2,
@@ -13,6 +14,26 @@ velocity u and acceleration Du/Dt trilinearly interpolated at the centre of mass
   centres lie in the cell) / (cell volume), per world, rebuilt every step, floored at
   ``min_voidage``. ``drag="schiller_naumann"`` (dilute limit, eps = 1): F_d = 3 pi mu d
   (1 + 0.15 Re^0.687) (u - v), C_d = 0.44 above Re = 1000 (Schiller & Naumann 1933).
+* The fluid velocity the drag reads, ``drag_velocity`` (a finite-size option: the gravel is 10-25 mm,
+  33-83 % of the 30 mm passage):
+
+  - ``"centre"`` (default): u at the centre of mass, the point-particle rule of CFD-DEM codes;
+  - ``"surface_average"``: the mean of u over the particle's sphere (Faxen's first law: the Stokes
+    drag of a sphere in a non-uniform flow is F = 3 pi mu d (<u>_S - v) with
+    <u>_S = u + (a^2 / 6) lap u + O(a^4); Faxen 1922, Ann. Phys. 68:89; Maxey & Riley 1983).
+    At finite Re the average is a model: Calzavarini et al. 2009, J. Fluid Mech. 630:179, use it as
+    the Faxen correction of finite-size point particles in turbulence;
+  - ``"volume_average"``: the mean over the particle's volume, <u>_V = u + (a^2 / 10) lap u + O(a^4)
+    (the average Calzavarini et al. 2009 apply to the fluid-acceleration terms).
+
+  Both averages by a six-point rule on the axes, <u> = (1/6) sum_k [u(x + rho e_k) + u(x - rho e_k)]
+  = u + (rho^2 / 6) lap u + O(rho^4), exact for fields up to cubic in x: rho = a (surface) or
+  a sqrt(3/5) (volume). Each sample is the grid's trilinear interpolation, so the grid must resolve
+  the particle (spacing below a). The undisturbed-flow and added-mass forces keep Du/Dt at the
+  centre. The averages correct for the flow's variation over the particle, not for its confinement:
+  a particle comparable to the passage forces the fluid it displaces past it, which raises its drag
+  (a sphere moving along a tube: Haberman & Sayre 1958, David Taylor Model Basin rep. 1143; Di
+  Felice 1996, Int. J. Multiphase Flow 22:527 at finite Re); that wall effect is not modelled.
 * Undisturbed-flow (pressure-gradient) force F_p = rho_f V Du/Dt (Maxey & Riley 1983); it equals
   -V grad p* where no blade force acts (:mod:`pump.flow`); times ``pressure_gradient`` (1 or 0).
 * Buoyancy F_b = -rho_f V g (times ``buoyancy``).
@@ -69,6 +90,10 @@ from warpdem.errors import ConfigError
 from .flow import FlowGrid
 
 DRAG_LAWS = ("di_felice", "schiller_naumann")
+#: where the drag reads the fluid velocity (module docstring), and the radius of the six-point rule
+#: as a fraction of the particle's radius: 1 for the surface mean, sqrt(3/5) for the volume mean
+DRAG_VELOCITIES = ("centre", "surface_average", "volume_average")
+DRAG_SAMPLE_RADIUS = {"centre": 0.0, "surface_average": 1.0, "volume_average": math.sqrt(3.0 / 5.0)}
 
 
 # ----------------------------------------------------------------------------- kernel arguments
@@ -128,6 +153,7 @@ class FluidCoupling:
     density: float  # rho_f [kg/m^3]
     viscosity: float  # mu_f [Pa s]
     drag_law: int  # index into DRAG_LAWS (0: Di Felice, 1: Schiller-Naumann)
+    drag_sample_radius: float  # rho / a of the drag velocity's six-point rule; 0: at the centre
     pressure_factor: float  # on rho_f V Du/Dt [-]
     buoyancy_factor: float  # on -rho_f V g [-]
     added_mass: float  # C_a [-]
@@ -209,6 +235,26 @@ def cell_fluid_mass(cells: VoidageGrid, c: int, rho_f: float):
 
 
 @wp.func
+def drag_velocity(flow: FluidField, fluid: FluidCoupling, x: wp.vec3, radius: float):
+    """The fluid velocity the drag reads [m/s] (module docstring): u(x) at the centre x [m], or the
+    six-point mean (1/6) sum_k [u(x + rho e_k) + u(x - rho e_k)], rho = ``fluid.drag_sample_radius``
+    times the body's ``radius`` [m]."""
+    if fluid.drag_sample_radius == 0.0:
+        return sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x)
+    rho = fluid.drag_sample_radius * radius
+    ex = wp.vec3(rho, 0.0, 0.0)
+    ey = wp.vec3(0.0, rho, 0.0)
+    ez = wp.vec3(0.0, 0.0, rho)
+    s = sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x + ex)
+    s = s + sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x - ex)
+    s = s + sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x + ey)
+    s = s + sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x - ey)
+    s = s + sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x + ez)
+    s = s + sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x - ez)
+    return s / 6.0
+
+
+@wp.func
 def drag_force(u_rel: wp.vec3, d: float, eps: float, fluid: FluidCoupling):
     """The drag law chosen by ``fluid.drag_law`` (0: Di Felice, 1: Schiller-Naumann) [N]."""
     if fluid.drag_law == 0:
@@ -238,7 +284,7 @@ def gather_drag_exchange(bodies: BodyView, flow: FluidField, cells: VoidageGrid,
         return
     x = bodies.position[b]
     v = bodies.velocity[b]
-    u0 = sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x)
+    u0 = drag_velocity(flow, fluid, x, bodies.radius[b])
     c = cell_of(cells, bodies.world[b], x)
     m_c = cell_fluid_mass(cells, c, fluid.density)
     slip = wp.length(u0 + exchange.momentum[c] / m_c - v)
@@ -277,7 +323,7 @@ def fluid_forces(bodies: BodyView, flow: FluidField, cells: VoidageGrid, fluid: 
         return
     x = bodies.position[b]
     v = bodies.velocity[b]
-    u = sample_vec3(flow.velocity, flow.origin, flow.inv_spacing, x)
+    u = drag_velocity(flow, fluid, x, bodies.radius[b])  # the drag's fluid velocity (centre or mean)
     a_f = sample_vec3(flow.acceleration, flow.origin, flow.inv_spacing, x)
     c = cell_of(cells, bodies.world[b], x)
     eps = cell_voidage(cells, c)
@@ -307,6 +353,9 @@ class GridFluidForces(BodyForceModel):
     Args:
         grid: the sampled flow (velocity, Du/Dt; fluid density and viscosity).
         drag: 'di_felice' (local voidage, default) or 'schiller_naumann' (dilute).
+        drag_velocity: where the drag reads the fluid velocity: 'centre' (default),
+            'surface_average' (Faxen: the mean over the particle's sphere) or 'volume_average'
+            (module docstring).
         two_way: correct the fluid velocity per coarse cell by the particles' drag reaction
             (module docstring); False (default): one-way, the prescribed flow only.
         relaxation: factor r [-] on the two-way relaxation rate |u0| / h_c towards the prescribed
@@ -327,12 +376,15 @@ class GridFluidForces(BodyForceModel):
                  "Phys. Fluids 26:883; Auton, Hunt & Prud'homme (1988) J. Fluid Mech. 197:241")
 
     def __init__(self, grid: FlowGrid, drag: str = "di_felice", two_way: bool = False, relaxation: float = 1.0,
-                 **values: float) -> None:
+                 drag_velocity: str = "centre", **values: float) -> None:
         super().__init__(**values)
         if not isinstance(grid, FlowGrid):
             raise ConfigError(f"grid_fluid: grid must be a pump.flow.FlowGrid, got {type(grid).__name__}")
         if drag not in DRAG_LAWS:
             raise ConfigError(f"grid_fluid: unknown drag law '{drag}'; valid: {list(DRAG_LAWS)}")
+        if not isinstance(drag_velocity, str) or drag_velocity not in DRAG_VELOCITIES:
+            raise ConfigError(f"grid_fluid: drag_velocity must be one of {list(DRAG_VELOCITIES)} (where the drag "
+                              f"reads the fluid velocity), got {drag_velocity!r}")
         if not isinstance(two_way, (bool, np.bool_)):
             raise ConfigError(f"grid_fluid: two_way must be true or false, got {two_way!r}")
         if isinstance(relaxation, bool) or not isinstance(relaxation, (int, float, np.floating, np.integer)) \
@@ -341,13 +393,15 @@ class GridFluidForces(BodyForceModel):
                               f"got {relaxation!r}")
         self.grid = grid
         self.drag = drag
+        self.drag_velocity = drag_velocity
         self.two_way = bool(two_way)
         self.relaxation = float(relaxation)
         self.cell_momentum = None  # two-way: (worlds * cells) vec3 [kg m/s], set by bind
         self.cell_velocity_change = None  # two-way: du_c (worlds * cells) vec3 [m/s]
 
     def describe(self) -> dict:
-        return {**super().describe(), "drag": self.drag, "grid_spacing": self.grid.spacing,
+        return {**super().describe(), "drag": self.drag, "drag_velocity": self.drag_velocity,
+                "grid_spacing": self.grid.spacing,
                 "grid_shape": list(self.grid.shape), "fluid_density": self.grid.density,
                 "fluid_viscosity": self.grid.viscosity, "coupling": "two-way" if self.two_way else "one-way",
                 **({"two_way_relaxation": self.relaxation} if self.two_way else {})}
@@ -405,6 +459,7 @@ class GridFluidForces(BodyForceModel):
         self._fluid.density = float(g.density)
         self._fluid.viscosity = float(g.viscosity)
         self._fluid.drag_law = DRAG_LAWS.index(self.drag)
+        self._fluid.drag_sample_radius = DRAG_SAMPLE_RADIUS[self.drag_velocity]
         self._fluid.pressure_factor = self.values["pressure_gradient"]
         self._fluid.buoyancy_factor = self.values["buoyancy"]
         self._fluid.added_mass = self.values["added_mass"]

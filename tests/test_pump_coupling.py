@@ -233,3 +233,82 @@ def test_fluid_forces_match_the_saved_reference_run():
 
 if __name__ == "__main__":  # regenerate the reference only when the physics changes on purpose
     np.savez(REFERENCE, **reference_runs())
+
+
+# ----------------------------------------------------------------------------- finite size: the drag's fluid velocity
+def schiller_naumann_force(u, d):
+    """(1/8) C_d rho_f pi d^2 |u| u for a body at rest [N], C_d = 24 / Re (1 + 0.15 Re^0.687), 0.44 from Re = 1000."""
+    speed = np.linalg.norm(u)
+    re = RHO_F * d * speed / MU_F
+    cd = 24 / re * (1 + 0.15 * re**0.687) if re < 1000 else 0.44
+    return 0.125 * cd * RHO_F * math.pi * d**2 * speed * np.asarray(u)
+
+
+def profile_stream(spacing, quadratic, upper=(0.12, 0.12, 0.12)):
+    """u(x) = u0 + S x + Q(x - x_ref) on [0, upper] (Du/Dt set to 0), x_ref = (0.06, 0.06, 0.06) m: S a
+    linear shear [1/s], Q quadratic with lap u = 2e4 (0.8 + 0.5, -0.6, 0.4) [1/(m s)] times ``quadratic`` [-];
+    returns the grid, u(x) and lap u."""
+    u0, shear = np.array([0.2, -0.1, 0.05]), np.array([[0.0, 3.0, 0.0], [0.0, 0.0, -2.0], [1.0, 0.0, 0.0]])
+    c = quadratic * np.array([0.8, 0.5, -0.6, 0.4]) * 1e4  # [1/(m s)]
+
+    def u(x):
+        x = np.asarray(x, dtype=float)
+        y = x - 0.06
+        q = np.stack([c[0] * y[..., 1] ** 2 + c[1] * y[..., 2] ** 2, c[2] * y[..., 0] ** 2, c[3] * y[..., 0] ** 2], -1)
+        return u0 + x @ shear.T + q
+
+    lap = 2.0 * np.array([c[0] + c[1], c[2], c[3]])
+    grid = FlowGrid.uniform((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), upper, spacing)
+    idx = np.stack(np.meshgrid(*[np.arange(n) for n in grid.shape], indexing="ij"), -1)
+    grid.velocity[...] = u(idx * spacing).astype(np.float32)
+    return grid, u, lap
+
+
+def first_step_forces(grid, bodies, drag_velocity):
+    forces = GridFluidForces(grid, drag="schiller_naumann", drag_velocity=drag_velocity, voidage_cell=0.05)
+    sim = simulation(bodies, forces, gravity=(0.0, 0.0, 0.0))
+    sim.run(1)
+    return sim.solver.body_force_context.force.numpy().astype(np.float64)
+
+
+# (drag_velocity, rho / a of its six-point rule, the analytic mean u + k a^2 lap u: k)
+AVERAGES = [("surface_average", 1.0, 1.0 / 6.0), ("volume_average", math.sqrt(0.6), 1.0 / 10.0)]
+
+
+@pytest.mark.parametrize("mode,rho_over_a,k", AVERAGES)
+def test_drag_velocity_is_the_faxen_mean_over_the_particle(mode, rho_over_a, k):
+    """Bodies at rest on grid nodes, their six-point samples on nodes too (trilinear sampling exact):
+    in a linear shear the mean equals the centre value; in a quadratic flow the drag reads
+    u + a^2/6 lap u (the mean over the sphere: Faxen's first law) or u + a^2/10 lap u (over the
+    volume), and the centre value differs from it by more than the test's tolerance."""
+    h = 0.002
+    radius = 3 * h / rho_over_a  # the rule's samples sit three nodes from the centre
+    centres = [np.array([0.052, 0.06, 0.066]), np.array([0.07, 0.054, 0.06]), np.array([0.06, 0.068, 0.05])]
+    bodies = [(tuple(x), radius) for x in centres]
+    for quadratic in (0.0, 1.0):
+        grid, u, lap = profile_stream(h, quadratic)
+        got = first_step_forces(grid, bodies, mode)
+        centre = first_step_forces(grid, bodies, "centre")
+        for x, f, f_c in zip(centres, got, centre):
+            mean = u(x) + k * radius**2 * lap
+            assert f == pytest.approx(schiller_naumann_force(mean, 2 * radius), rel=2e-4)
+            assert f_c == pytest.approx(schiller_naumann_force(u(x), 2 * radius), rel=2e-4)
+            if quadratic == 0.0:  # linear: every mean is the centre value
+                assert f == pytest.approx(f_c, rel=2e-4)
+            else:  # the correction k a^2 lap u is 12-20 % of |u| here: the test can tell a wrong mean
+                assert np.linalg.norm(f - f_c) > 0.1 * np.linalg.norm(f_c)
+
+
+def test_drag_velocity_choice_is_checked_and_reported():
+    with pytest.raises(wd.ConfigError, match="drag_velocity must be one of"):
+        GridFluidForces(still(), drag_velocity="volume")
+    assert GridFluidForces(still(), drag_velocity="surface_average").describe()["drag_velocity"] == "surface_average"
+    from pump.config_schema import load_config
+
+    with pytest.raises(wd.ConfigError, match=r"fluid.drag_velocity must be one of 'centre', 'surface_average' or "
+                                             r"'volume_average', got 'average'"):
+        load_config({"fluid": {"drag_velocity": "average"}})
+    with pytest.raises(wd.ConfigError, match=r"fluid.side_room_rotation"):
+        load_config({"fluid": {"side_room_rotation": 1.5}})
+    with pytest.raises(wd.ConfigError, match=r"design: side_gap must be a positive number"):
+        load_config({"design": {"side_gap": 0.0}})
