@@ -27,6 +27,26 @@ Passages for 10-25 mm gravel (slurry practice: no passage narrower than the larg
 (32 mm blade-to-blade throat), a 25 mm tongue clearance and a 30 mm volute throat. Such an
 oversized slurry volute cannot hold the impeller's angular momentum (K_v < r2 c_u2): the swirl
 decays across the vaneless gap r2..r3, which is a mixing loss stated by :attr:`volute_loss_head`.
+
+Side clearances (``side_gap`` g, the axial gap between each impeller disc -- shroud and hub -- and
+the casing's side liner; the side rooms are the spaces r <= r2 between them). A sphere of diameter
+d can enter a side room only where g > d (:mod:`pump.geometry`). Slurry pumps run either tight
+side clearances (a few mm, usually with expelling vanes on the shrouds that keep the side rooms
+clear of solids) or side rooms of the order of the particle size, where solids recirculate and
+grind the suction liner (throatbush) and the back liner -- a wear pattern slurry-pump users look
+for, and the reason the front clearance of slurry pumps is adjustable (Wilson, Addie, Sellgren &
+Clift 2006, *Slurry Transport Using Centrifugal Pumps*, 3rd ed., Springer). The default, chosen
+here (no drawing gives it), is g = 20 mm: of the order of the 10-25 mm gravel, so the quick
+config's 10-14 mm spheres and three of the five calibrated clump classes (volume-equivalent
+14-16 mm: discoids, spheres, ellipsoids, in some orientations) can enter, the cones and prisms
+(21-23 mm) hardly; no expelling vanes. The casing is flat-sided, so the volute is b3 = b2 + 2 g
+wide (70 mm, b3 / b2 = 2.3: a wide slurry volute); its swirl K_v is lower and the stated mixing
+loss larger than with a narrow casing (7.6 m at the default duty against 4.9 m with g = 3 mm),
+a limit of this flat-sided casing. With g = 3 mm (the value before issue 34, below every
+particle's radius) no particle can enter a side room. The front side room is closed at the eye
+by the throatbush lip down to a 1 mm running clearance (:data:`pump.geometry.EYE_SEAL_CLEARANCE`),
+so no particle short-cuts from the eye into it; the flow in the side rooms is a rotating core
+(:mod:`pump.flow`).
 """
 from __future__ import annotations
 
@@ -73,8 +93,10 @@ class PumpDesign:
         blades: number of blades z; blade_thickness [m]; outlet_width b2 [m].
         leading_edge_radius r1 [m]; beta1_deg: inlet blade angle [deg from circumferential].
         beta2_deg: outlet blade angle; None = solved from the head.
-        tongue_clearance: r3 - r2 [m]; side_gap: axial gap impeller disc - casing [m]
-            (smaller than the smallest particle radius, so no particle enters the side rooms).
+        tongue_clearance: r3 - r2 [m].
+        side_gap: axial clearance g between each impeller disc (shroud, hub) and the casing's
+            side liner [m]; the side rooms (r <= r2) admit particles of diameter below g (module
+            docstring: 20 mm, of the order of the gravel; 0.003 keeps every particle out).
         throat_height: radial height of the volute throat [m]; discharge_length [m].
     """
 
@@ -91,7 +113,7 @@ class PumpDesign:
     beta1_deg: float = 25.0
     beta2_deg: float | None = None
     tongue_clearance: float = 0.025
-    side_gap: float = 0.003
+    side_gap: float = 0.020
     throat_height: float = 0.030
     discharge_length: float = 0.15
     derived: dict = field(default_factory=dict, compare=False, repr=False)

@@ -21,7 +21,8 @@ import numpy as np
 
 from .erosion import (WEAR_LIFE_FASTEST_H, WEAR_LIFE_SLOWEST_H, WEAR_LIFE_SOURCES, wear_life_hours,
                       wear_life_plausible)
-from .regions import MAX_RELATIVE_HALF_WIDTH, MIN_IMPACTS, Estimate, estimate, volute_sector_names
+from .regions import (MAX_RELATIVE_HALF_WIDTH, MIN_IMPACTS, SIDE_ROOM_LINERS, Estimate, estimate,
+                      volute_sector_names)
 from .wear import METRICS, RATE_METRICS, WearRecorder, derive
 
 #: metrics with a per-sample estimate in the tables (rates, and the EDEM step-summed force per block)
@@ -30,8 +31,9 @@ TABLE_METRICS = RATE_METRICS + ("edem_cumulative_force_n", "edem_cumulative_forc
 CASING = ("volute", "tongue")
 IMPELLER = ("shroud", "blade", "hub")
 #: region groups: the casing's wetted wall (spiral sectors and cutwater, without the side walls and the
-#: disc shadows) and the whole blade
+#: side-room liners), the side-room liners together, and the whole blade
 REGION_MERGES = {"volute_wall_and_cutwater": ("cutwater",) + volute_sector_names(),
+                 "side_room_liners": SIDE_ROOM_LINERS,
                  "blade_all_zones": ("blade_leading_edge", "blade_pressure_side", "blade_suction_side",
                                      "blade_trailing_edge", "blade_unzoned")}
 #: impeller regions the blade leading edge is compared with (finding 2)
@@ -157,7 +159,7 @@ def retest_findings(components: WindowStats, regions: WindowStats | None) -> dic
        casing (volute + tongue) vs shroud, blade, hub on the extensive time-averaged tangential force
        [N], on the paper's own per-element metric (EDEM step-summed force per element) and per
        unit area [Pa]; and per unit area of the casing's wetted wall only (spiral wall and cutwater,
-       without the side walls that the 3 mm gaps shield) vs the blade, hub and shroud;
+       without its flat side walls and the side-room liners) vs the blade, hub and shroud;
     2. "the head of the blade reaches the maximum normal cumulative contact energy" (Fig. 17a):
        blade leading edge vs pressure side, suction side, trailing edge, hub, shroud on the normal
        contact energy per unit area and time [W/m^2]."""

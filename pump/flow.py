@@ -23,18 +23,34 @@ DEM walls, not by the fluid). Cylindrical components (c_r, c_u, c_z) about the p
 * Discharge duct (x >= r3, y > 0): parallel flow along +y with the free-vortex profile
   u_y = K_v / x, so the throat section and the duct carry the same Q and the profile is
   continuous at the throat.
+* Side rooms (r <= r2 between a disc and the casing's side liner: b2 < z < b2 + g in front,
+  -g < z < 0 behind; g = ``design.side_gap``): a core in solid-body rotation, c_u = k omega r,
+  c_r = c_z = 0, with the rotation factor k = ``side_room_rotation`` (default 0.5). Between a
+  rotating disc and a stationary wall with separate boundary layers (the turbulent regime IV of
+  Daily & Nece 1960, J. Basic Eng. 82:217) the core turns at a fraction k of the disc speed; with no
+  leakage through the side room and the same wall friction on disc and casing k_0 = 0.5 (Gulich
+  2003, Forsch. Ingenieurwes. 68:87, eq. T1.3 with r_w = r2; Gulich 2014, ch. 9). Pressure from
+  the core's radial equilibrium, p*(r) = p*(r2) - rho k^2 omega^2 (r2^2 - r^2) / 2 (the side-room
+  pressure behind the axial thrust, Gulich 2014, ch. 9), p*(r2) the impeller's outlet pressure.
+  Not modelled: the leakage flow through the side rooms (to the eye seal in front), the disc's
+  and the liner's boundary layers (outward pumping on the disc, inward flow on the liner: Daily &
+  Nece's secondary flow, which carries particles along the liner), expelling vanes (which raise k
+  towards 1).
 
 Pressure (piezometric, p* = p - rho g.x, relative to the suction pipe's static pressure):
 Bernoulli p* = p0_t - rho c^2 / 2 where the flow is irrotational (pipe, eye, vaneless inlet);
 rothalpy conservation along the blades (Bernoulli in the rotating frame, inviscid),
 p* = p0_t + rho (u^2 - w^2) / 2; radial equilibrium in the gap and the volute,
 dp*/dr = rho (c_u^2 / r - c_r dc_r/dr), integrated from r2; no streamwise gradient in the duct.
+The side rooms (above) are in radial equilibrium with their rotating core.
 The particle force uses the fluid acceleration Du/Dt sampled on the grid (Maxey & Riley's
 undisturbed-flow force rho_f V Du/Dt, which equals -V grad p where no blade force acts); the
 pressure field is for output and for the consistency check -grad p / rho = Du/Dt.
 
 Outside the fluid the formulas are continued (not zeroed), so trilinear interpolation near the
-walls does not mix in zeros.
+walls does not mix in zeros: each zone's formula continues beyond its walls (above the front wall
+the pipe's where the pipe wall is the nearer wall, else the side room's or the volute's; behind
+the back wall the side room's and the volute's).
 """
 from __future__ import annotations
 
@@ -50,6 +66,8 @@ from .geometry import PumpGeometry, blade_angle_at
 
 WATER_DENSITY = 998.2  # [kg/m^3] at 20 C
 WATER_VISCOSITY = 1.002e-3  # dynamic viscosity [Pa s] at 20 C
+#: rotation factor k of the side rooms' core without leakage (Daily & Nece 1960; Gulich 2003, eq. T1.3)
+SIDE_ROOM_ROTATION = 0.5
 
 
 @dataclass
@@ -59,17 +77,24 @@ class PumpFlow:
     Args:
         geometry: the pump.
         density: fluid density [kg/m^3]; viscosity: dynamic viscosity [Pa s].
+        side_room_rotation: rotation factor k [-] of the side rooms' core, c_u = k omega r (module
+            docstring; 0.5: no leakage, Daily & Nece 1960, Gulich 2003), in [0, 1].
     """
 
     geometry: PumpGeometry
     density: float = WATER_DENSITY
     viscosity: float = WATER_VISCOSITY
+    side_room_rotation: float = SIDE_ROOM_ROTATION
 
     def __post_init__(self) -> None:
         if not (self.density > 0 and math.isfinite(self.density)):
             raise ConfigError(f"fluid density must be > 0 kg/m^3, got {self.density}")
         if not (self.viscosity > 0 and math.isfinite(self.viscosity)):
             raise ConfigError(f"fluid viscosity must be > 0 Pa s, got {self.viscosity}")
+        k = self.side_room_rotation
+        if isinstance(k, bool) or not isinstance(k, (int, float)) or not (math.isfinite(k) and 0.0 <= k <= 1.0):
+            raise ConfigError(f"side_room_rotation (the side rooms' core rotation c_u / (omega r)) must be a number "
+                              f"in [0, 1], got {k!r}")
         d = self.geometry.design
         self.q = d.flow_rate
         self.omega = d.omega
@@ -79,6 +104,7 @@ class PumpFlow:
         # radial-equilibrium pressure beyond r2 on a fine 1-D grid
         self._r_eq = np.linspace(d.r2, 2.0 * d.r_throat + 0.1, 4000)
         self._p_eq = self._radial_equilibrium(self._r_eq)
+        self._p2 = float(self._impeller_pressure(np.array([d.r2]))[0])
 
     # ------------------------------------------------------------------ components
     def impeller_swirl(self, r: np.ndarray) -> np.ndarray:
@@ -100,6 +126,17 @@ class PumpFlow:
         d = self.geometry.design
         s = np.clip((np.asarray(r, dtype=float) - d.r2) / (d.r3 - d.r2), 0.0, 1.0)
         return d.k_impeller + (d.k_volute - d.k_impeller) * s
+
+    def side_room_swirl(self, r: np.ndarray) -> np.ndarray:
+        """c_u = k omega r [m/s] of the side rooms' rotating core."""
+        return self.side_room_rotation * self.omega * np.asarray(r, dtype=float)
+
+    def side_room_pressure(self, r: np.ndarray) -> np.ndarray:
+        """p*(r) = p*(r2) - rho k^2 omega^2 (r2^2 - r^2) / 2 [Pa] in the side rooms (radial equilibrium
+        of the rotating core)."""
+        d = self.geometry.design
+        kw = self.side_room_rotation * self.omega
+        return self._p2 - 0.5 * self.density * kw**2 * (d.r2**2 - np.asarray(r, dtype=float) ** 2)
 
     def _radial_equilibrium(self, r: np.ndarray) -> np.ndarray:
         d = self.geometry.design
@@ -142,14 +179,16 @@ class PumpFlow:
         cz = np.zeros(len(x))
         p = np.zeros(len(x))
 
-        # above the casing's front wall the pipe formula is continued outwards, so that
-        # interpolation next to the pipe wall sees the pipe flow
-        pipe = ((r <= R) & (z >= b2)) | (z > geo.z_front)
-        corner = (r <= R) & (z < b2)
-        imp = (r > R) & (r <= d.r2) & ~pipe
-        vol = (r > d.r2) & ~pipe
+        # zones; beyond the walls each zone's formula is continued (module docstring): above the front
+        # wall the pipe's where the pipe wall is nearer than the front wall, so that interpolation next
+        # to either wall sees the flow on its fluid side
+        above = z - geo.z_front
+        pipe = ((r <= R) & (z >= b2)) | ((above > 0.0) & (r - R < above))
+        corner = (r <= R) & (z >= 0.0) & (z < b2)
+        side = (r <= d.r2) & ((z < 0.0) | (z > b2)) & ~pipe
+        imp = (r > R) & (r <= d.r2) & (z >= 0.0) & (z <= b2)
         duct = (x[:, 0] >= d.r3) & (x[:, 1] > 0.0)
-        vol &= ~duct
+        vol = (r > d.r2) & ~duct
 
         cz[pipe] = -U
         p[pipe] = 0.0
@@ -160,6 +199,8 @@ class PumpFlow:
         cr[imp] = self.q / (2.0 * np.pi * r[imp] * b2)
         cu[imp] = self.impeller_swirl(r[imp])
         p[imp] = self._impeller_pressure(r[imp])
+        cu[side] = self.side_room_swirl(r[side])
+        p[side] = self.side_room_pressure(r[side])
         cr[vol] = self.q / (2.0 * np.pi * r[vol] * self.volute_width(r[vol]))
         cu[vol] = self.angular_momentum(r[vol]) / r[vol]
         p[vol] = np.interp(r[vol], self._r_eq, self._p_eq)

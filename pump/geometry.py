@@ -13,14 +13,22 @@ Two walls:
   beta linear from beta_1B to beta_2B, i.e. a log spiral when they are equal), offset by +-t/2
   normal to the camber, rounded (semicircular) leading and trailing edges, spanning 0 <= z <= b2.
 * ``casing`` (static): spiral outer wall r_o(theta) = r3 exp(k theta), k = Q / (2 pi K_v b3)
-  (free-vortex volute, :mod:`pump.design`), flat side walls at z = -g and z = b2 + g, the tongue
-  where the spiral starts (theta = 0), a straight rectangular discharge duct of the throat's
-  section along +y, and the suction pipe (radius R_in) along +z.
+  (free-vortex volute, :mod:`pump.design`), flat side walls at z = -g and z = b2 + g (g the side
+  clearance ``design.side_gap``), each split at r = r2 into the side-room liner (r <= r2: the
+  suction liner facing the shroud, the back liner facing the hub) and the volute's side wall
+  (r > r2), the tongue where the spiral starts (theta = 0), a straight rectangular discharge duct
+  of the throat's section along +y, and the suction pipe (radius R_in) along +z, whose wall (the
+  throatbush lip) reaches down to :data:`EYE_SEAL_CLEARANCE` above the shroud's eye.
 
 Every triangle carries its component (index into :data:`COMPONENTS`); blade triangles also carry
 a zone (:data:`BLADE_ZONES`: leading edge, pressure side, suction side, trailing edge). The walls
-are open surfaces (two-sided for the DEM contact); particles cannot enter the side rooms because
-the side gap g is smaller than the smallest particle radius.
+are open surfaces (two-sided for the DEM contact) of zero thickness.
+
+Side rooms: the spaces between the discs and the side-room liners (b2 < z < b2 + g and -g < z < 0,
+r <= r2). A sphere of radius a keeps its centre at least a from the shroud plane and from the liner,
+so it enters the front side room only if g > 2 a (the gap exceeds its diameter); the back side room
+likewise. With the 1 mm eye seal no particle reaches the front side room from the eye: the only way
+in is the gap at the impeller's rim, r = r2.
 """
 from __future__ import annotations
 
@@ -42,7 +50,11 @@ BLADE_ZONES = ("none", "leading_edge", "pressure_side", "suction_side", "trailin
 # fraction of the blade's radial extent (from r1) counted as its "head" (leading-edge zone)
 LEADING_EDGE_FRACTION = 0.12
 # particle regions for counts over time (see PumpGeometry.region_of)
-REGIONS = ("outside", "inlet", "impeller", "volute", "discharge")
+REGIONS = ("outside", "inlet", "impeller", "volute", "discharge", "side_rooms")
+#: axial running clearance between the suction pipe's lower end (the throatbush lip at r = R_in)
+#: and the shroud's eye [m]: smaller than any particle, so the front side room connects to the eye
+#: only through a gap no particle passes (the leakage flow through it is not modelled)
+EYE_SEAL_CLEARANCE = 0.001
 
 
 @dataclass
@@ -261,8 +273,9 @@ class PumpGeometry:
 
     def region_of(self, x: np.ndarray) -> np.ndarray:
         """Region index (:data:`REGIONS`) of points x (n, 3) [m] in the stationary frame:
-        inlet (suction pipe and eye gap), impeller (r <= r2 between the casing walls),
-        volute (r2 < r inside the spiral), discharge (the duct), else outside."""
+        inlet (suction pipe and eye gap), impeller (r <= r2 between the discs, 0 <= z <= b2),
+        side_rooms (r <= r2 between a disc and the casing's side liner), volute (r2 < r inside the
+        spiral), discharge (the duct), else outside."""
         x = np.atleast_2d(np.asarray(x, dtype=float))
         d = self.design
         r = np.hypot(x[:, 0], x[:, 1])
@@ -271,13 +284,16 @@ class PumpGeometry:
         out = np.zeros(len(x), dtype=np.int64)
         in_band = (z >= self.z_back) & (z <= self.z_front)
         pipe = (z >= d.b2) & (z <= self.inlet_top) & (r <= d.r_inlet)
-        impeller = in_band & (r <= d.r2) & ~pipe
+        beside = in_band & (r <= d.r2) & ~pipe
+        impeller = beside & (z >= 0.0) & (z <= d.b2)
+        side = beside & ~impeller
         duct = in_band & (x[:, 0] >= d.r3) & (x[:, 0] <= d.r_throat) & (x[:, 1] >= 0.0) & (x[:, 1] <= self.outlet_y)
         volute = in_band & (r > d.r2) & (r <= self.spiral_radius(th)) & ~duct
         out[pipe] = 1
         out[impeller] = 2
         out[volute] = 3
         out[duct] = 4
+        out[side] = 5
         return out
 
 
@@ -323,10 +339,11 @@ def build_pump(design: PumpDesign | None = None, resolution: float = 1.0,
     comp = np.where(spiral_theta < np.radians(20.0), COMPONENTS.index("tongue"), COMPONENTS.index("volute"))
     spiral = TaggedMesh(sv, sf, comp)
     parts_cas = [spiral]
-    # side walls: polar rings from the eye (front) / near the axis (back) to the spiral
+    # side walls: the side-room liners from the eye (front) / the axis (back) to r2, then the
+    # volute's side walls from r2 to the spiral (split at r2 so that a triangle lies on one side)
     for z, r_in in ((z_front, d.r_inlet), (z_back, 0.0)):
-        inner = annulus(r_in, d.r2 - 0.01, z, n_sp, n(6, 2), "volute")
-        outer = annulus(d.r2 - 0.01, ro, z, n_sp + 1, n(10, 3), "volute", theta=th)
+        inner = annulus(r_in, d.r2, z, n_sp, n(8, 2), "volute")
+        outer = annulus(d.r2, ro, z, n_sp + 1, n(10, 3), "volute", theta=th)
         parts_cas += [inner, outer]
     # discharge duct (along +y from the throat section at theta = 0)
     length = d.discharge_length
@@ -342,9 +359,13 @@ def build_pump(design: PumpDesign | None = None, resolution: float = 1.0,
         rectangle((d.r3, 0.0, z_back), (h, 0.0, 0.0), (0.0, length, 0.0), n(4, 2), n_len, "outlet"),
         rectangle((d.r3, 0.0, z_front), (h, 0.0, 0.0), (0.0, length, 0.0), n(4, 2), n_len, "outlet"),
     ]
-    # suction pipe
+    # suction pipe, and its lip (the throatbush's) down to the eye seal clearance above the shroud
     top = z_front + d.inlet_length
     parts_cas.append(cylinder(d.r_inlet, z_front, top, n(48, 16), n(d.inlet_length / 0.01, 4), "inlet"))
+    if g > EYE_SEAL_CLEARANCE:
+        lip = b2 + EYE_SEAL_CLEARANCE
+        parts_cas.append(cylinder(d.r_inlet, lip, z_front, n(48, 16), max(1, int(math.ceil((z_front - lip) / 0.01))),
+                                  "inlet"))
     casing = TaggedMesh.concatenate(parts_cas)
     geo = PumpGeometry(d, impeller, casing, inlet_top=top, outlet_y=length)
     if user_meshes:

@@ -728,18 +728,15 @@ def _paper_needs(results: dict) -> str:
     paper_revs = float(paper["run"]["revolutions"])
     paper_blocks = max(1, int((paper_revs - float(paper["wear"]["spin_up_revolutions"]))
                               / float(paper["wear"]["block_revolutions"])))
-    # the variance per sample grows about as 1 / (particles per revolution); the solids ratio is a lower
-    # bound on the particle-count ratio when the paper's particles (clumps up to 25 mm) are the larger
-    scale = max(phi / paper_phi, 1.0)
+    scale, fewer, more = _loading_scale(phi, paper_phi)
     if not needs:
         worlds = max(1, math.ceil(w["window"]["samples"] * scale / paper_blocks))
         return (f"Every re-tested reading is decided at this scale ({w['window']['samples']} samples at "
                 f"{100 * phi:.1f} % solids by volume). The paper's conditions (paper_pump.yaml: calibrated clumps, "
-                f"{100 * paper_phi:g} % solids, {paper_revs:g} revolutions at dt = {paper['run']['dt']:.3g} s) pass at "
-                f"least {scale:.0f}x fewer particles per revolution, so intervals as narrow need at least {scale:.0f}x the "
-                f"samples: at least {worlds} worlds of {paper_revs:g} revolutions ({paper_blocks} after the spin-up), a "
-                f"GPU run; the tangential rule and the clump shapes may also change the outcome (issue 34), which only "
-                f"that run can tell.")
+                f"{100 * paper_phi:g} % solids, {paper_revs:g} revolutions at dt = {paper['run']['dt']:.3g} s) {fewer}, "
+                f"so intervals as narrow need {more}: at least {worlds} worlds of {paper_revs:g} "
+                f"revolutions ({paper_blocks} after the spin-up), a GPU run; the tangential rule and the clump shapes "
+                f"may also change the outcome (issue 34), which only that run can tell.")
     if any(n < 0 for n in needs):
         return ("Some readings rest on a single sample (one world, one revolution after the spin-up) and have no "
                 "interval: run more revolutions or worlds (run.worlds) before reading them.")
@@ -747,10 +744,55 @@ def _paper_needs(results: dict) -> str:
     worlds = max(1, math.ceil(n * scale / paper_blocks))
     return (f"The undecided readings need about {n} samples (world x revolution) at this run's loading "
             f"({100 * phi:.1f} % solids by volume). The paper's conditions ({100 * paper_phi:g} % solids of calibrated "
-            f"clumps) pass at least {scale:.0f}x fewer particles per revolution, so the variance per sample grows at "
-            f"least as much: at least {worlds} worlds of the paper's {paper_revs:g} revolutions ({paper_blocks} after the spin-up), i.e. a GPU "
-            f"run of paper_pump.yaml with run.worlds >= {worlds}; the per-element reading stays mesh-dependent "
-            f"whatever the sample size.")
+            f"clumps) {fewer}, so they need {more}: at least {worlds} worlds of the paper's "
+            f"{paper_revs:g} revolutions ({paper_blocks} after the spin-up), i.e. a GPU run of paper_pump.yaml with "
+            f"run.worlds >= {worlds}; the per-element reading stays mesh-dependent whatever the sample size.")
+
+
+def _loading_scale(phi: float, paper_phi: float) -> tuple[float, str, str]:
+    """Factor on the samples the paper's conditions need against this run's, how their particle
+    rates compare and what that asks of the samples, from the solids loadings (by volume). The
+    variance per sample grows about as 1 / (particles per revolution), and the solids ratio is a
+    lower bound on the particle-count ratio when the paper's particles (clumps up to 25 mm) are the
+    larger. Within a factor 1.5 of the paper's loading the run counts as at it (factor 1, said
+    plainly); more dilute than the paper, the factor stays 1 (at most as many samples)."""
+    ratio = phi / paper_phi
+    if ratio >= 1.5:
+        return (ratio, f"pass at least {_times(ratio)} fewer particles per revolution than this run",
+                f"at least {_times(ratio)} the samples")
+    if ratio > 1.0 / 1.5:
+        return 1.0, f"are at about this run's solids loading ({100 * phi:.2g} %)", "about as many samples as here"
+    return (1.0, f"are at a higher solids loading than this run ({100 * paper_phi:g} % against {100 * phi:.2g} %)",
+            "at most about as many samples as here")
+
+
+def _times(ratio: float) -> str:
+    """'4x', '2.5x', '12x'."""
+    return (f"{ratio:.0f}" if ratio >= 10 else f"{ratio:.1f}".rstrip("0").rstrip(".")) + "x"
+
+
+def _side_room_text(side: dict | None) -> str:
+    """The side rooms' clearance, flow and occupancy, for the report's set-up table."""
+    if not side:
+        return "-"
+    g = 1e3 * side["side_gap_m"]
+    return (f"side clearance {g:g} mm between each disc and its liner (particles smaller than {g:g} mm can enter; "
+            f"the eye sealed to {1e3 * side['eye_seal_clearance_m']:g} mm), fluid core turning at "
+            f"k = {side['core_rotation_factor']:g} of the impeller speed (Daily & Nece 1960; Gulich); "
+            f"{side['mean_particles_per_world']:.2g} particles per world in the side rooms on average, at most "
+            f"{side['max_particles_all_worlds']} (all worlds); wear on the suction and back liners: regions "
+            f"suction_liner, back_liner")
+
+
+def _drag_text(drag: dict | None) -> str:
+    """The drag law and where it reads the fluid velocity, for the report's set-up table."""
+    if not drag:
+        return "-"
+    where = {"centre": "at the particle's centre (point particle; no finite-size correction)",
+             "surface_average": "averaged over the particle's sphere (Faxen: u + a^2/6 lap u)",
+             "volume_average": "averaged over the particle's volume (u + a^2/10 lap u)"}[drag["velocity"]]
+    return (f"{drag['law'].replace('_', ' ')}, fluid velocity {where}; no wall (confinement) correction for "
+            f"particles comparable to the passage")
 
 
 def report_content(case, results: dict) -> dict:
@@ -861,6 +903,8 @@ def report_content(case, results: dict) -> dict:
                      f"Wiesner slip {d.slip_factor:.3f}, blades {d.blade_thickness * 1e3:g} mm thick"],
         ["volute", f"r3 = {d.r3 * 1e3:.1f} mm, width {d.b3 * 1e3:g} mm, throat {d.throat_height * 1e3:g} mm, "
                    f"K_v / K_2 = {d.k_volute / d.k_impeller:.2f} (mixing loss {d.volute_loss_head:.1f} m)"],
+        ["side rooms", _side_room_text(results.get("side_rooms"))],
+        ["drag", _drag_text(results.get("drag"))],
         ["particles", f"{case.material.name}, {p['rate_per_s_per_world']:.1f}/s per world "
                       f"({100 * sol['volume_fraction']:.2g} % solids by volume), {p['injected']} injected in "
                       f"{p['worlds']} world(s), {p['left_outlet']} left through the outlet, {p['lost']} lost"],

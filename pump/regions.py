@@ -6,9 +6,11 @@ Regions (:func:`pump_regions`) split the two pump walls where a pump engineer lo
   :mod:`pump.geometry`), hub, shroud;
 * casing: the cutwater (the tongue component), the volute's spiral wall in 45-deg sectors of the
   angle from the tongue (``volute_000_045`` ... ``volute_315_360``, flow direction +theta), the
-  side liners beside the volute (front = suction side, back = drive side, r > r2), the casing walls
-  behind the impeller discs (r <= r2, behind the shroud / hub: the 3 mm side gaps keep particles
-  out), the suction pipe and the discharge duct.
+  volute's flat side walls (``volute_side_front`` = suction side, ``volute_side_back`` = drive
+  side, r > r2), the side-room liners behind the impeller discs (r <= r2): ``suction_liner``
+  facing the shroud (the throatbush's face) and ``back_liner`` facing the hub (particles reach
+  them only where the side clearance exceeds their size, :mod:`pump.design`), the suction pipe
+  (with the throatbush lip at the eye) and the discharge duct.
 
 Statistics (:func:`block_statistics`): a run is cut into blocks (one revolution each, after a
 spin-up) in every world; each (world, block) gives one sample of a rate (an increment over the
@@ -47,7 +49,9 @@ def volute_sector_names(width_deg: int = VOLUTE_SECTOR_DEG) -> tuple[str, ...]:
 
 
 CASING_REGIONS = ("cutwater",) + volute_sector_names() + (
-    "side_liner_front", "side_liner_back", "casing_behind_shroud", "casing_behind_hub", "suction_pipe", "discharge")
+    "volute_side_front", "volute_side_back", "suction_liner", "back_liner", "suction_pipe", "discharge")
+#: the side-room liners (r <= r2 behind the shroud and the hub)
+SIDE_ROOM_LINERS = ("suction_liner", "back_liner")
 REGIONS = IMPELLER_REGIONS + CASING_REGIONS
 
 
@@ -86,9 +90,9 @@ def casing_regions(geo: PumpGeometry) -> np.ndarray:
             reg = "discharge"
         elif name == "volute" and flat[k]:
             if r[k] <= d.r2:
-                reg = "casing_behind_shroud" if front[k] else "casing_behind_hub"
+                reg = "suction_liner" if front[k] else "back_liner"
             else:
-                reg = "side_liner_front" if front[k] else "side_liner_back"
+                reg = "volute_side_front" if front[k] else "volute_side_back"
         else:  # the spiral wall (or a user volute mesh)
             reg = sectors[min(int(theta[k] // VOLUTE_SECTOR_DEG), len(sectors) - 1)]
         out[k] = REGIONS.index(reg)

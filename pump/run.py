@@ -14,8 +14,10 @@ Config keys (SI units; every section optional except what a case needs):
     name, device (cpu | cuda), output (folder), seed
     design: PumpDesign fields (flow_rate_m3h, speed_rpm, head, inlet_length, ...)
     geometry: {resolution: 1.0, meshes: {component: path}, mesh_scale: 1.0}
-    fluid: {density, viscosity, grid_spacing, drag: di_felice|schiller_naumann, added_mass,
-            pressure_gradient, buoyancy, voidage_cell}
+    fluid: {density, viscosity, grid_spacing, drag: di_felice|schiller_naumann,
+            drag_velocity: centre|surface_average|volume_average (where the drag reads the fluid
+            velocity, pump.coupling), side_room_rotation: 0.5 (the side rooms' core c_u / (omega r),
+            pump.flow), added_mass, pressure_gradient, buoyancy, voidage_cell}
     coupling: {two_way: false (one-way, default) | true (the particles' drag corrects the fluid
                velocity per coarse cell, pump.coupling), relaxation: 1.0 (factor on |u0| / cell)}
     particles: {material: (calibration.materials.BulkMaterial config), volume_fraction | rate,
@@ -45,7 +47,8 @@ from warpdem.errors import ConfigError, WarpDEMError
 # the config (its schema, defaults and loader) lives in pump.config_schema; its names stay importable here
 from .config_schema import DEFAULTS, MAX_STEPS, SECTIONS, load_config  # noqa: F401 (DEFAULTS, MAX_STEPS, SECTIONS)
 from .design import PumpDesign
-from .geometry import COMPONENTS, REGIONS, PumpGeometry, blade_camber, build_pump, passage_clearances
+from .geometry import (COMPONENTS, EYE_SEAL_CLEARANCE, REGIONS, PumpGeometry, blade_camber, build_pump,
+                       passage_clearances)
 
 # ----------------------------------------------------------------------------- the case
 @dataclass
@@ -92,7 +95,7 @@ def build_case(cfg: dict) -> PumpCase:
     gcfg = cfg["geometry"]
     geo = build_pump(design, float(gcfg["resolution"]), gcfg["meshes"] or None, float(gcfg["mesh_scale"]))
     fl = cfg["fluid"]
-    flow = PumpFlow(geo, float(fl["density"]), float(fl["viscosity"]))
+    flow = PumpFlow(geo, float(fl["density"]), float(fl["viscosity"]), float(fl["side_room_rotation"]))
     grid = flow.sample(float(fl["grid_spacing"]))
     t_grid = _time.perf_counter()
 
@@ -132,7 +135,7 @@ def build_case(cfg: dict) -> PumpCase:
     inlet = ParticleInlet(geo, plan, samples)
     inlet.add_to_builder(b, material.particle.name)
     b.set_contact_parameters(**cc)
-    fluid = GridFluidForces(grid, drag=fl["drag"], added_mass=fl["added_mass"],
+    fluid = GridFluidForces(grid, drag=fl["drag"], drag_velocity=fl["drag_velocity"], added_mass=fl["added_mass"],
                             pressure_gradient=fl["pressure_gradient"], buoyancy=fl["buoyancy"],
                             voidage_cell=fl["voidage_cell"], two_way=cfg["coupling"]["two_way"],
                             relaxation=float(cfg["coupling"]["relaxation"]))
@@ -339,6 +342,7 @@ def analyse(case: PumpCase, rec: RunRecord) -> dict:
     ss_contact = reg_en.get("blade_suction_side", 0.0) + reg_et.get("blade_suction_side", 0.0)
     f3 = bool(ph.size) and ps_entry > 0.5 and ps_contact > ss_contact
     counts = np.asarray(rec.region_counts)
+    side = REGIONS.index("side_rooms")
     out_w, lost_w = case.inlet.removed_per_world()
     # largest normal impact speed and the Hertz overlap it gives a mean particle on the wall
     # (Johnson 1985: delta = (15 m v^2 / (16 E* sqrt(R)))^(2/5))
@@ -362,6 +366,12 @@ def analyse(case: PumpCase, rec: RunRecord) -> dict:
     return {
         "design": d.summary(),
         "clearances_m": passage_clearances(case.geometry),
+        "side_rooms": {
+            "side_gap_m": d.side_gap, "core_rotation_factor": float(case.flow.side_room_rotation),
+            "eye_seal_clearance_m": EYE_SEAL_CLEARANCE,
+            "mean_particles_per_world": float(counts[:, :, side].mean()) if counts.size else 0.0,
+            "max_particles_all_worlds": int(counts[:, :, side].sum(axis=1).max()) if counts.size else 0},
+        "drag": {"law": case.fluid.drag, "velocity": case.fluid.drag_velocity},
         "fluid_checks": {
             "flow_rate_duty_m3s": d.flow_rate,
             "flow_rate_grid_m3s": rates,
