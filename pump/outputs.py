@@ -791,8 +791,8 @@ def _drag_text(drag: dict | None) -> str:
     where = {"centre": "at the particle's centre (point particle; no finite-size correction)",
              "surface_average": "averaged over the particle's sphere (Faxen: u + a^2/6 lap u)",
              "volume_average": "averaged over the particle's volume (u + a^2/10 lap u)"}[drag["velocity"]]
-    return (f"{drag['law'].replace('_', ' ')}, fluid velocity {where}; no wall (confinement) correction for "
-            f"particles comparable to the passage")
+    law = {"di_felice": "Di Felice (1994)", "schiller_naumann": "Schiller-Naumann"}.get(drag["law"], drag["law"])
+    return f"{law}, fluid velocity {where}; no wall (confinement) correction for particles comparable to the passage"
 
 
 def report_content(case, results: dict) -> dict:

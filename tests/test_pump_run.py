@@ -55,7 +55,12 @@ def test_short_run_writes_every_output(tmp_path):
     assert {t["verdict"] for f in ("volute_wears_most", "leading_edge_highest_normal_energy")
             for t in res["findings"][f].values()} == {"cannot tell"}
     assert not any(r["converged"] for r in res["wear"]["regions"].values())
-    assert "wear_regions.png" in (tmp_path / "report.md").read_text()
+    report = (tmp_path / "report.md").read_text()
+    assert "wear_regions.png" in report
+    # the side rooms and the drag's velocity are stated; the side-room liners are regions of the report
+    assert res["side_rooms"]["side_gap_m"] == 0.020 and res["drag"] == {"law": "di_felice", "velocity": "centre"}
+    assert "side clearance 20 mm" in report and "| suction_liner |" in report and "| back_liner |" in report
+    assert "fluid velocity at the particle's centre" in report
     frames = sorted((tmp_path / "vtk").glob("particles_*.vtp"))
     assert len(frames) >= 2
     last = pv.read(frames[-1])
