@@ -176,7 +176,8 @@ def build_diagnosis(cfg, base_dir: Path, device: str | None = None, output: Path
     forward = DEMForwardModel(desc, material, effects, specs, scale=cfg.scale, experiment_settings=cfg.experiments,
                               fixed=fixed, device=device or cfg.device, processes=procs, cache=cache,
                               progress=False, proposals=proposals, executor=executor,
-                              proposals_not_forecast=plan.not_forecast())
+                              proposals_not_forecast=plan.not_forecast(),
+                              cache_code_version=cfg.cache_code_version)
     try:  # every condition's experiment is built now (settings, fill size), not when its DEM starts
         forward.check_experiments()
     except ConfigError as exc:

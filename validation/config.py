@@ -127,6 +127,7 @@ class DiagnosisConfig(_Strict):
     max_proposed_conditions: WholeNumber = Field(6, ge=0)
     diagnosis: DiagnosisSection = Field(default_factory=DiagnosisSection)
     cache: str | None = None
+    cache_code_version: Literal["match", "any"] = "match"
     progress: Flag = True
 
     @field_validator("processes", mode="before")

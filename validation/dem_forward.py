@@ -22,6 +22,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from calibration.campaign_records import code_version
 from calibration.experiments import EXPERIMENTS, make_experiment
 from calibration.experiments.checkpoints import BatchCheckpoints
 from calibration.materials import BulkMaterial
@@ -105,7 +106,8 @@ class DEMForwardModel(ForwardModel):
                  processes: int | str | None = "auto", cache: str | Path | None = None,
                  progress: bool = False, proposals: Sequence[ProposedMeasurement] = (),
                  superset: bool | str = "auto", checkpoint_every_s: float | None = 120.0,
-                 executor: Any = None, proposals_not_forecast: Sequence[str] = ()) -> None:
+                 executor: Any = None, proposals_not_forecast: Sequence[str] = (),
+                 cache_code_version: str = "match") -> None:
         self.base = base
         self.base_material = base_material
         self.effects = {e.name: e for e in effects}
@@ -130,6 +132,13 @@ class DEMForwardModel(ForwardModel):
         self.checkpoints = None if self.cache_path is None or checkpoint_every_s is None else BatchCheckpoints(
             self.cache_path.parent / f"{self.cache_path.stem}_checkpoints", float(checkpoint_every_s))
         self._cache: dict[str, dict[str, Any]] = {}
+        if cache_code_version not in ("match", "any"):
+            raise ConfigError(f"cache_code_version must be 'match' or 'any', got {cache_code_version!r}")
+        # the engine and experiment sources that made a world (calibration.campaign_records.code_version):
+        # every cache record carries it, and a record made by other code is not served (see _load_cache)
+        self.code = code_version()["source_sha256"]
+        self.cache_code_version = cache_code_version
+        self.cache_other_code = 0
         kinds = [e.kind for e in effects]
         mergeable = len(set(kinds)) == len(kinds)
         if superset == "auto":
@@ -156,8 +165,21 @@ class DEMForwardModel(ForwardModel):
         start on a fresh line) and its world is run again."""
         assert self._cache_file is not None
         contents = self._cache_file.read()
+        other: dict[str, int] = {}
         for _, rec in contents.records:
-            self._cache[rec["id"]] = rec
+            made_by = rec.get("code")
+            if made_by == self.code or self.cache_code_version == "any":
+                if made_by == self.code or rec["id"] not in self._cache:
+                    self._cache[rec["id"]] = rec
+            else:
+                key = made_by or "unrecorded"
+                other[key] = other.get(key, 0) + 1
+        self.cache_other_code = sum(other.values())
+        if other:
+            versions = ", ".join(f"{n} by {v}" for v, n in sorted(other.items()))
+            print(f"DEM cache {self.cache_path}: {sum(other.values())} cached world(s) were made by other engine or "
+                  f"experiment code ({versions}; this code is {self.code}); they are not used and run again if "
+                  f"needed (cache_code_version: any reuses them on purpose)", file=sys.stderr, flush=True)
         if contents.torn:
             print(f"DEM cache {self.cache_path}: {len(contents.torn)} torn line(s) dropped (a write cut by an "
                   f"interruption, kept in {self.cache_path.name}.torn); those worlds will be run again",
@@ -205,7 +227,8 @@ class DEMForwardModel(ForwardModel):
         return {"models": {e: self.description(every, e).describe() for e in sorted(EXPERIMENTS)},
                 "effects": sorted(self.effects), "superset": self.superset, "scale": self.scale,
                 "experiment_settings": self.experiment_settings, "fixed": self.fixed,
-                "cache": str(self.cache_path.resolve()) if self.cache_path else None, "device": self.device}
+                "cache": str(self.cache_path.resolve()) if self.cache_path else None, "device": self.device,
+                "cache_code_version": self.cache_code_version}
 
     def adopt(self, other: "DEMForwardModel", where: str = "") -> None:
         """Serve ``other``'s observables and proposals too (one forward model, one cache, pooled
@@ -276,6 +299,7 @@ class DEMForwardModel(ForwardModel):
         return False
 
     def _store(self, rec: dict[str, Any]) -> None:
+        rec = {**rec, "code": self.code}
         self._cache[rec["id"]] = rec
         if self._cache_file is not None:
             self._cache_file.append([rec])
