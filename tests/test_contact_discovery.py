@@ -82,7 +82,7 @@ def clean_registry():
 def test_builtins_found_by_scanning_the_package():
     assert {"hertz_mindlin", "none", "rolling", "cohesion"} <= set(contact.BUILTIN_MODULES)
     assert contact.available("cohesion") == ["none", "sjkr", "sjkr2", "sjkr2_reduced", "sjkr_reduced"]
-    assert contact.available("rolling") == ["cdt", "cdt_liggghts", "epsd", "epsd2", "none"]
+    assert contact.available("rolling") == ["cdt", "cdt_body_arm", "cdt_liggghts", "epsd", "epsd2", "none"]
 
 
 def test_a_new_file_in_the_package_folder_is_one_new_effect(tmp_path, monkeypatch):

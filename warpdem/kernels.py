@@ -277,6 +277,18 @@ def whole_body_mass(m: float, i_mean: float, lever: wp.vec3, n: wp.vec3):
     return m
 
 
+@wp.func
+def body_lever(offset: wp.vec3, arm: float, n: wp.vec3):
+    """Distance [m] from a contact point to the centre of mass of the sphere's body: the point
+    lies ``arm`` [m] from the sphere centre against the unit normal ``n``, and the sphere centre
+    ``offset`` [m] from the body's centre of mass, so |offset - arm n|. A sphere of its own
+    (offset 0) gets ``arm`` itself, bit for bit. The lever of EDEM's rolling friction
+    (:class:`warpdem.contact.rolling.BodyArmCDT`)."""
+    if wp.dot(offset, offset) == 0.0:
+        return arm
+    return wp.length(offset - arm * n)
+
+
 def damping_mass_function(convention: str) -> "wp.Function":
     """The ``wp.func`` (m, i_mean, lever, n) -> m_i [kg] of a clump damping convention
     (:attr:`warpdem.contact.law.ContactLaw.clump_damping_mass`), chosen when a stage kernel is

@@ -59,6 +59,11 @@ class ContactInput:
     i_eff: float  # effective moment of inertia 1/(1/I_i + 1/I_j) [kg m^2]
     dt: float  # time step [s]
     row: int  # parameter-table row = 2 * world + pair_type
+    # i's rigid body (a clump, or the sphere itself), set only when a sub-model of the law declares
+    # ``needs_body_kinematics`` (a compile-time switch of the stages; else left 0):
+    arm_body: float  # distance from the contact point to the centre of mass of i's body [m]
+    w_body: wp.vec3  # angular velocity of i's body [rad/s] (not relative to the partner)
+    i_body: float  # mean principal moment of inertia of i's body [kg m^2]
 
 
 @dataclass(frozen=True)
@@ -109,6 +114,11 @@ class SubModel:
     reference: ClassVar[str] = ""
     #: the sub-model a diagnosis tries first for its kind's effect (e.g. rolling resistance)
     default_candidate: ClassVar[bool] = False
+    #: whether the sub-model reads ``ContactInput.arm_body``, ``w_body`` and ``i_body`` (the lever
+    #: from the contact point to the body's centre of mass, the body's own angular velocity and
+    #: moment of inertia); the contact stages compute them only for a law that has such a sub-model
+    #: (:attr:`ContactLaw.needs_body_kinematics`), so other laws compile to the same code as before
+    needs_body_kinematics: ClassVar[bool] = False
     #: cohesion sub-models: whether the tangential (Coulomb) and rolling limits see this force,
     #: i.e. get ``fn`` = normal + cohesion (LIGGGHTS ``tangential_reduce on``); False: they get
     #: the normal sub-model's force alone (LIGGGHTS 3.8's default, ``tangential_reduce off``).

@@ -117,6 +117,12 @@ class ContactLaw:
     def needs_rolling_history(self) -> bool:
         return self.submodels["rolling"].needs_history
 
+    @property
+    def needs_body_kinematics(self) -> bool:
+        """Whether a sub-model reads the body fields of :class:`~warpdem.contact.ContactInput`
+        (``arm_body``, ``w_body``, ``i_body``): a compile-time switch of the contact stages."""
+        return any(bool(getattr(s, "needs_body_kinematics", False)) for s in self.submodels.values())
+
     def describe(self) -> str:
         """``hertz+mindlin+rolling:epsd+cohesion:none``; a non-default clump damping mass is
         appended (``+clump_damping:body``), so the default law's text is unchanged."""

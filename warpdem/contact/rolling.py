@@ -8,6 +8,18 @@
           |tau| <= I* |w_rel| / dt. (LIGGGHTS ``rolling_friction cdt``, src/rolling_model_cdt.h,
           is the same model with the elastic F_n = k_n delta and lever R* instead, no guard:
           ``cdt_liggghts``. Between equal spheres R* = r/2 against EDEM's R_i ~ r.)
+``cdt_body_arm`` EDEM's "Standard Rolling Friction" as its documentation defines it, for
+          multi-sphere particles: tau_i = -mu_r F_n R_i w_i/|w_i| with R_i = the distance from
+          the contact point to the **centre of mass of i's body** (the clump's, not the member
+          sphere's centre) and w_i the **body's own angular velocity** (not relative to the
+          partner, not projected on the tangent plane; EDEM: "the unit angular velocity vector
+          of the object at the contact point"). Same guard as ``cdt`` with the body's inertia,
+          |tau| <= I_i |w_i| / dt. It differs from ``cdt`` for clumps (a longer lever: a member
+          sphere's contact point lies up to the clump's bounding radius from the centre of mass),
+          wherever the partner turns too (a bed turning rigidly with a drum, w_i = w_j = w_drum,
+          feels no ``cdt`` torque but this one) and for spin about the normal. A sphere of its own
+          rolling on a fixed wall, or on a sphere at rest, gets ``cdt``'s torque bit for bit
+          (while the guard does not bind).
 ``cdt_liggghts`` LIGGGHTS 3.8 ``rolling_friction cdt`` (src/rolling_model_cdt.h):
           tau_i = -mu_r (k_n delta) R* w_rel / |w_rel|, its component along the normal removed,
           k_n delta = 4/3 E* sqrt(R* delta) delta the elastic Hertz force (no damping, no
@@ -98,6 +110,45 @@ class ConstantDirectionalTorque(SubModel):
             return -t_mag / w_len * w_roll, spring
 
         return cdt_rolling
+
+
+@register
+class BodyArmCDT(SubModel):
+    """EDEM's "Standard Rolling Friction" (Altair EDEM Creator documentation, Physics > Rolling
+    Friction > "Standard Rolling Friction Model": tau_i = -mu_r F_n R_i w_i, "R_i the distance of
+    the contact point from the center of mass, and w_i the unit angular velocity vector of the
+    object at the contact point"; EDEM's separate "RVD Rolling Friction" model is the one that
+    uses the relative angular velocity of the two elements). For a multi-sphere particle the
+    centre of mass and the angular velocity are the clump's.
+
+    Differences from ``cdt`` (which follows Ai et al. 2011 model A with the member sphere's
+    lever): the lever is |p - x_body| (:func:`warpdem.kernels.body_lever`) instead of the
+    distance r_i - delta/2 (wall: r_i - delta) from the member sphere's centre, and the torque
+    opposes the body's own angular velocity w_i (full vector) instead of the tangential part of
+    w_i - w_j. The guard caps |tau| at I_i |w_i| / dt (I_i: the body's mean principal moment),
+    so that one contact cannot reverse the body's spin within a step."""
+
+    kind = "rolling"
+    name = "cdt_body_arm"
+    parameters = (MU_R,)
+    needs_body_kinematics = True
+    reference = ("EDEM Standard Rolling Friction (Altair EDEM documentation): tau_i = -mu_r F_n R_i w_i/|w_i|, "
+                 "R_i = contact point to the particle's centre of mass, w_i the particle's own angular velocity")
+
+    def make(self, column):
+        c_mu = column("mu_r")
+
+        @wp.func
+        def cdt_body_arm_rolling(c: ContactInput, p: wp.array2d(dtype=float), fn: float, spring: wp.vec3):
+            w_len = wp.length(c.w_body)
+            if w_len < 1.0e-12:
+                return wp.vec3(0.0), spring
+            t_mag = p[c.row, c_mu] * wp.max(fn, 0.0) * c.arm_body
+            t_guard = c.i_body * w_len / c.dt
+            t_mag = wp.min(t_mag, t_guard)
+            return -t_mag / w_len * c.w_body, spring
+
+        return cdt_body_arm_rolling
 
 
 @register

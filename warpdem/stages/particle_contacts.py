@@ -8,7 +8,7 @@ import warp as wp
 
 from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
-from ..kernels import damping_mass_function, effective_shear_modulus, effective_youngs_modulus
+from ..kernels import body_lever, damping_mass_function, effective_shear_modulus, effective_youngs_modulus
 from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
 from .launch import force_kernel
 from .law import law_evaluator
@@ -31,7 +31,9 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
     contact point p = x_i - (r_i - delta / 2) n; last step's history of partner j is taken;
     R* = r_i r_j / (r_i + r_j), m* = m_i m_j / (m_i + m_j) with the masses felt at p
     (:func:`warpdem.kernels.mass_felt_at`; the whole-body masses with
-    ``law.clump_damping_mass == "body"``), I* = I_i I_j / (I_i + I_j). The contacts are
+    ``law.clump_damping_mass == "body"``), I* = I_i I_j / (I_i + I_j); for a law with
+    ``needs_body_kinematics`` also |p - x_body| (:func:`warpdem.kernels.body_lever`), the
+    body's angular velocity and mean moment of inertia. The contacts are
     appended after the wall contacts of stage 1 (``found.count``) and the forces added, in
     neighbour order, to the sums of stage 2 (zero without wall contacts), so the result does
     not depend on the split into stages. Also the stage that finishes every sphere's row:
@@ -40,6 +42,7 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
     evaluate = law_evaluator(law)
     damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     roll_hist = bool(law.needs_rolling_history)
+    body_kin = bool(law.needs_body_kinematics)  # compiled in: the body's lever, spin and inertia
     nb_entry = entry_function(neighbour_layout)  # compiled in: where entry k of sphere i lies
     slot = entry_function(history_layout)
 
@@ -139,6 +142,10 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
             c.i_eff = ib_mean * ibj_mean / (ib_mean + ibj_mean)
             c.dt = dt
             c.row = 2 * world
+            if wp.static(body_kin):
+                c.arm_body = body_lever(xi - xb, arm_i, nrm)
+                c.w_body = wb
+                c.i_body = ib_mean
             fn, ft, tr, spring_new, roll_new = evaluate(c, params.table, spring, roll)
             force = fn * nrm + ft
             f_sum = f_sum + force

@@ -25,9 +25,9 @@ import warp as wp
 
 from ..contact.base import ContactInput
 from ..contact.law import ContactLaw
-from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, closest_point_triangle, effective_shear_modulus,
-                       damping_mass_function, effective_youngs_modulus, point_in_wall_rest_frame, wall_is_moving,
-                       wall_motion_time, wall_point_velocity)
+from ..kernels import (SLOT_EMPTY, WALL_MATCH_COS, WALL_MERGE_COS, body_lever, closest_point_triangle,
+                       damping_mass_function, effective_shear_modulus, effective_youngs_modulus,
+                       point_in_wall_rest_frame, wall_is_moving, wall_motion_time, wall_point_velocity)
 from ..layouts import DEFAULT_SLOT_LAYOUT, entry_function
 from .launch import force_kernel
 from .law import law_evaluator
@@ -357,6 +357,7 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
     half_overlap_point = bool(getattr(law.submodels["normal"], "wall_contact_at_half_overlap", False))
     track_wear = bool(law.track_wear)
     roll_hist = bool(law.needs_rolling_history)
+    body_kin = bool(law.needs_body_kinematics)  # compiled in: the body's lever, spin and inertia
     entry = entry_function(history_layout)  # compiled in: where slot s of sphere i lies
     collect_sphere_wall_contacts = wall_collection_function(history_layout)
 
@@ -428,6 +429,10 @@ def wall_stage_kernels(law: ContactLaw, history_layout: str = DEFAULT_SLOT_LAYOU
             c.i_eff = me.i_mean
             c.dt = dt
             c.row = 2 * world + 1
+            if wp.static(body_kin):
+                c.arm_body = body_lever(xi - xb, arm, nrm)
+                c.w_body = wb
+                c.i_body = me.i_mean
             fn, ft, tr, spring_new, roll_new = evaluate(c, params.table, spring, roll)
             force = fn * nrm + ft
             f_sum = f_sum + force
