@@ -14,10 +14,12 @@ decides where the batches of one :meth:`Experiment.run` go:
   caller, with the same message as in a local run.
 
 Same numbers: a batch's worlds take their fills by world index (``first_fill_index + world``), so a
-split never changes a world's fill. The time step and the walls' height follow the fills of one
-batch, so a world's result is bitwise the same for the same split of the batch (a Ray run with
-``tasks = n`` equals a local CPU run with ``processes = n``); across splits it moves within the
-fill-to-fill noise. Ray is an optional dependency (``pip install "warpdem[ray]"``).
+split never changes a world's fill; the time step (the material's smallest possible sphere), the
+walls' height and their motion start (the tallest loose column the fill mass can form) follow the
+settings and the material, not the fills of a batch, and each world settles, and lifts the hollow
+cylinder, on its own. So a world's result is bitwise the same in any split and on any executor on
+the same device kind (a Ray run with ``tasks = n`` equals a local CPU run with ``processes = m``).
+Ray is an optional dependency (``pip install "warpdem[ray]"``).
 """
 from __future__ import annotations
 

@@ -346,9 +346,7 @@ def test_world_result_does_not_depend_on_its_batch():
 
 def test_an_unstable_world_fails_alone_and_the_batch_goes_on(monkeypatch):
     """A world whose bodies turn NaN is frozen by the engine and marked failed with the cause;
-    the other world of the batch is measured as if it had run alone. (Same parameters in both
-    worlds: with different ones a cylinder world's result moves slightly with its batch, see the
-    docs/known_limits.md.)"""
+    the other world of the batch is measured as if it had run alone."""
     original = HollowCylinder.protocol
 
     def poisoned(self, ctx, t_motion):

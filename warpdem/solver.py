@@ -1034,9 +1034,22 @@ class Simulation:
         self.solver.place_spheres(self.state)
         return self.state.sphere_x.numpy().astype(np.float64)
 
-    def remove_outside(self, lower, upper) -> int:
-        """Deactivate bodies whose centre is outside the box; returns how many were removed now."""
+    def remove_outside(self, lower, upper, worlds=None) -> int:
+        """Deactivate bodies whose centre is outside the box; returns how many were removed now.
+        ``worlds``: only those of these worlds (indices or a boolean mask over worlds; None: all)."""
         m = self.model
+        if worlds is not None:
+            sel = np.zeros(m.num_worlds, dtype=bool)
+            sel[np.asarray(worlds)] = True
+            q = self.state.body_q.numpy()
+            active = self.state.body_active.numpy().copy()
+            lo, hi = np.asarray(lower, dtype=np.float32), np.asarray(upper, dtype=np.float32)
+            out = (active != 0) & sel[m.host["body_world"]] & np.any((q < lo) | (q > hi), axis=1)
+            if out.any():  # the same test as the kernel's, on the same float32 numbers
+                active[out] = 0
+                self.state.body_active.assign(active)
+                self.solver.invalidate_views()
+            return int(out.sum())
         removed = wp.zeros(1, dtype=int, device=m.device)
         wp.launch(kernels.deactivate_outside, dim=m.num_bodies,
                   inputs=[self.state.body_q, wp.vec3(*lower), wp.vec3(*upper), self.state.body_active, removed],
@@ -1086,22 +1099,35 @@ class Simulation:
             self.pause_worlds(paused)
         try:
             while not paused.all():
-                k = int(min(chunk, n_max[~paused].max() - done))
+                # checks fall every ``chunk`` steps from the start; a world whose max_time ends
+                # between two checks stops there, alone: its removal and kinetic energy are read
+                # for it only, so the other worlds see the checks they would see without it
+                # (and it ends as it would alone, where its end is the last chunk's)
+                ends = n_max[~paused]
+                if ends.min() <= done:  # a world's end is here already (max_time 0, or a resumed loop)
+                    target = done
+                else:
+                    target = min((done // chunk + 1) * chunk, int(ends.max()))
+                    between = ends[ends < target]
+                    target = int(between.min()) if between.size else target
+                k = target - done
                 if k > 0:
                     # the option is passed only when set, so wrappers of run() without it still work
                     self.run(k, check_every=k, **({} if on_unstable is None else {"on_unstable": on_unstable}))
                     failed = self.solver.failed_worlds()
                     done += k
-                    if remove_box is not None:
-                        removed += self.remove_outside(*remove_box)
+                every = (k > 0 and done % chunk == 0) or done >= ends.max()
+                check = ~paused if every else ~paused & (done >= n_max)
+                if remove_box is not None:
+                    removed += self.remove_outside(*remove_box, worlds=None if every else check)
                 bad = np.zeros(nw, dtype=bool)
                 bad[list(failed)] = True
                 active = np.bincount(worlds, weights=self.state.body_active.numpy(), minlength=nw)
                 ke = self.kinetic_energy() / np.maximum(active, 1)
-                ke_report[~paused] = ke[~paused]
-                now_met = ~paused & ~bad & (done * self.dt >= min_w - 1e-12) & (ke < ke_per_particle)
+                ke_report[check] = ke[check]
+                now_met = check & ~bad & (done * self.dt >= min_w - 1e-12) & (ke < ke_per_particle)
                 met |= now_met
-                stop = now_met | (~paused & ((done >= n_max) | bad))
+                stop = now_met | (check & ((done >= n_max) | bad))
                 if stop.any():
                     paused |= stop
                     self.pause_worlds(paused)

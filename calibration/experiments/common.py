@@ -6,10 +6,16 @@ runs the experiment's protocol and measures each world with
 :mod:`calibration.measurement`.
 
 Protocol clock: wall motions are part of the immutable model, so their start time must be
-known when it is built. Every experiment starts its motion at ``t_motion`` = the fill's
-largest settling time; when the fill settles earlier the state's clock is moved forward
-to ``t_motion`` (walls are at rest before their start, so nothing else depends on time).
-Reported simulated times are the phases actually simulated, without the jump.
+known when it is built. Every experiment starts its motion at ``t_motion`` = the longest a fill
+of its settings and material may settle (:meth:`Experiment.motion_start`); when the fills settle
+earlier the state's clock is moved forward to ``t_motion`` (walls are at rest before their start,
+so nothing else depends on time). Reported simulated times are the phases actually simulated,
+without the jump.
+
+Batches: the walls' height and ``t_motion`` follow the settings and the material (the tallest
+loose column the fill mass can form, :meth:`Experiment.loose_top_bound`), not the fills a batch
+drew, and the time step follows the material's smallest possible sphere; so a world's result
+does not depend on the worlds it shares a batch (or a process) with.
 
 Batch checkpoints: :mod:`calibration.experiments.checkpoints`; the protocol steps they resume:
 :mod:`calibration.experiments.run_context`.
@@ -33,7 +39,7 @@ from warpdem.config_io import BYTES_PER_SPHERE as _BYTES_PER_SPHERE
 from warpdem.config_io import machine_memory
 
 from ..executor import LocalExecutor, RayExecutor
-from ..filling import FillResult, add_fill, pour_fill, random_fill
+from ..filling import FillError, FillResult, add_fill, pour_fill, random_fill
 from ..materials import BulkMaterial, sample_particles
 from .checkpoints import BatchCheckpoint, BatchCheckpoints, clear_checkpoints, decode_value
 from .results_json import jsonable as _jsonable
@@ -48,6 +54,12 @@ G = 9.81
 MAX_PARTICLES_PER_WORLD = 200_000
 #: memory one sphere of a world takes at most [bytes] (warpdem.config_io.BYTES_PER_SPHERE)
 BYTES_PER_SPHERE = _BYTES_PER_SPHERE
+#: the loosest a loose fill's column packs, as solids volume / (floor area x column height) of the
+#: random placement before settling (calibration.filling.random_fill); measured (2026-11-28, 4 fills
+#: each): spheres 0.27, the paper's gravel clumps 0.19, rods of aspect ratio 3.5 (the elongated
+#: family's largest) 0.14. The walls' height and the motion start follow the column this bound
+#: allows (:meth:`Experiment.loose_top_bound`); a fill that rises above it is refused.
+LOOSE_SOLIDS_FRACTION_BOUND = 0.10
 
 
 # --------------------------------------------------------------------------- meshes
@@ -405,6 +417,9 @@ class Experiment:
         raise NotImplementedError
 
     def add_walls(self, builder: wd.ModelBuilder, fill_top: float, t_motion: float, material: BulkMaterial) -> None:
+        """The walls, their motion starting at ``t_motion`` [s]; ``fill_top``: the highest a loose
+        fill can reach [m] (:meth:`loose_top_bound`, not the fills drawn: walls are shared by the
+        worlds of a batch)."""
         raise NotImplementedError
 
     def protocol(self, ctx: RunContext, t_motion: float) -> list[dict[str, Any]]:
@@ -440,6 +455,50 @@ class Experiment:
         so that a world's settling does not depend on the other worlds of its batch."""
         per = [self.fill_settle_times([fills[w if len(fills) > 1 else 0]]) for w in range(num_worlds)]
         return np.array([p[0] for p in per]), np.array([p[1] for p in per])
+
+    def max_fill_mass(self, material: BulkMaterial) -> float:
+        """The most mass [kg] one fill of ``material`` can hold: the fill mass and one heaviest
+        particle (:func:`~calibration.materials.sample_particles` stops at the count closest to the
+        mass), or the fill's count of the heaviest particles."""
+        heaviest = (material.particle.density * math.pi / 6.0 * material.diameter[1] ** 3 if material.is_spheres
+                    else max(float(t.mass) for t, _ in material.clumps))
+        amount = self.fill_amount(material)
+        return float(amount["mass"]) + heaviest if "mass" in amount else float(amount["n"]) * heaviest
+
+    def loose_top_bound(self, material: BulkMaterial) -> float:
+        """The highest top [m] a loose fill of these settings and ``material`` can reach, whatever
+        a batch draws: a closed region's top; in an open one, the column of the most mass the fill
+        can hold at :data:`LOOSE_SOLIDS_FRACTION_BOUND` over the region's floor, and one largest
+        particle diameter, at least the region's top. The walls' height and the motion start
+        follow it (the fills are checked against it: :meth:`check_fill_tops`)."""
+        region = self.fill_region()
+        lo, hi = region.bounds
+        if not region.open_top:
+            return float(hi[2])
+        area = (math.pi * region.radius ** 2 if hasattr(region, "radius")
+                else float((hi[0] - lo[0]) * (hi[1] - lo[1])))
+        column = self.max_fill_mass(material) / material.particle.density / (area * LOOSE_SOLIDS_FRACTION_BOUND)
+        return float(max(hi[2], lo[2] + column + 2.0 * material.max_bounding_radius))
+
+    def check_fill_tops(self, fills: list[FillResult], material: BulkMaterial) -> None:
+        """Refuse (FillError) a fill whose loose column rises above :meth:`loose_top_bound`."""
+        bound = self.loose_top_bound(material)
+        for f in fills:
+            if f.top > bound:
+                raise FillError(f"{self.name}: a loose fill's column reaches {f.top:.3f} m, above the "
+                                f"{bound:.3f} m the walls and the motion start are built for (its solids fraction "
+                                f"{f.loose_solids_fraction:.3f} is below LOOSE_SOLIDS_FRACTION_BOUND = "
+                                f"{LOOSE_SOLIDS_FRACTION_BOUND} in calibration/experiments/common.py): a wider "
+                                "region or a smaller fill")
+
+    def motion_start(self, material: BulkMaterial) -> float:
+        """``t_motion`` [s]: the longest a fill of these settings and ``material`` may settle
+        (``fill_settle_max_time``, and the free fall of :meth:`loose_top_bound` when that stands
+        above the region; each world settles by its own fill, :meth:`fill_settle_times_per_world`),
+        whatever fills a batch drew."""
+        lo, hi = self.fill_region().bounds
+        top = self.loose_top_bound(material)
+        return self.fill_settle_max_time + (math.sqrt(2.0 * (top - lo[2]) / G) if top > hi[2] + 1e-12 else 0.0)
 
     def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int,
                           checkpoints: BatchCheckpoints | None = None,
@@ -487,7 +546,7 @@ class Experiment:
             builder.add_material(self.wall_material)
         for w in range(nw):
             add_fill(builder, fills[w if len(fills) > 1 else 0], material.particle.name, w)
-        self.add_walls(builder, max(f.top for f in fills), t_motion, material)
+        self.add_walls(builder, self.loose_top_bound(material), t_motion, material)
         if defaults:
             builder.set_contact_parameters(**defaults)
         for w, ps in enumerate(sets):
@@ -523,10 +582,9 @@ class Experiment:
 
         processes: on the CPU, split the worlds over this many processes ("auto": one per
         usable core). Warp runs CPU kernels on one thread, so this is how a CPU run uses several
-        cores. Every world keeps its fill and parameters; worlds sharing one fill give the same
-        results in any split (settled worlds wait at rest); with a fill per world the time step
-        follows the material (the same in every chunk); the walls' height above the fill and the hollow
-        cylinder's lift time follow each chunk's fills, so those can differ within the fill scatter.
+        cores. Every world keeps its fill and parameters and gives the same results in any split:
+        settled worlds wait at rest, and the time step, the walls' height and the motion start follow
+        the settings and the material, not the fills a chunk drew (module docstring, "Batches").
         Ignored on CUDA, where one launch already runs every world. Scripts that use
         processes > 1 need the ``if __name__ == "__main__":`` guard (spawned interpreters).
 
@@ -583,7 +641,8 @@ class Experiment:
                 for w in range(nw)]
         else:
             fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
-        _, t_motion = self.fill_settle_times(fills)
+        self.check_fill_tops(fills, material)
+        t_motion = self.motion_start(material)
         max_contacts, max_neighbours = max(int(self.max_contacts), _contact_slots(materials)), self.max_neighbours
         retries: list[dict[str, Any]] = []
         checkpoint = saved = None
@@ -668,6 +727,7 @@ class Experiment:
                     "fill": {"particles_per_world": int(fills[0].sample.n),
                              "mass_per_world_kg": round(fills[0].sample.total_mass, 6),
                              "loose_top_m": round(max(f.top for f in fills), 6),
+                             "loose_top_bound_m": round(self.loose_top_bound(material), 6),
                              "above_region": bool(any(f.above_region for f in fills)),
                              "pours": int(max(f.pours for f in fills))}}
         results = []
