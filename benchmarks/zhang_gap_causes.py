@@ -761,8 +761,9 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
         ray = ex.connect()
         res = ray.cluster_resources()
         slots = max(1, int(res.get("GPU", 0)) if on_gpu else int(res.get("CPU", 1)))
-        remote = ray.remote(_run_chunk_on_ray).options(num_gpus=1 if on_gpu else 0, num_cpus=1, max_retries=1,
-                                                       retry_exceptions=False)
+        # a GPU task in a worker of its own (RayExecutor.remote_function says why)
+        remote = ray.remote(num_gpus=1, max_calls=1)(_run_chunk_on_ray) if on_gpu else ray.remote(_run_chunk_on_ray)
+        remote = remote.options(num_gpus=1 if on_gpu else 0, num_cpus=1, max_retries=1, retry_exceptions=False)
         inflight: dict[Any, tuple[Batch, float]] = {}
         pending = list(todo)
         while pending or inflight:

@@ -122,13 +122,23 @@ class RayExecutor:
             slots = int(res.get("CPU", 1) // max(self.cpus_per_task, 1e-9))
         return max(1, min(slots, worlds))
 
+    def remote_function(self, ray: Any, fn: Callable, on_gpu: bool) -> Any:
+        """``fn`` as a Ray remote function with this executor's resources. A task that holds GPUs
+        runs in a worker process of its own (``max_calls=1``, Ray's default for functions declared
+        with GPUs): Ray names a task's GPUs through ``CUDA_VISIBLE_DEVICES``, read once when CUDA
+        starts in a process, so a reused worker would run every later task on the GPU of its first
+        one, and two tasks of one batch could share a GPU while another stands idle. The price is
+        a fresh start per task (Python imports, Warp's start and its kernel cache loaded again)."""
+        gpus = self.gpus_per_task if on_gpu else 0
+        declared = ray.remote(num_gpus=gpus, max_calls=1)(fn) if gpus > 0 else ray.remote(fn)
+        return declared.options(num_gpus=gpus, num_cpus=self.cpus_per_task, max_retries=self.max_retries,
+                                retry_exceptions=False)
+
     def map(self, fn: Callable, calls: list[tuple], on_gpu: bool) -> list[Any]:
         """``[fn(*args) for args in calls]``, each call a Ray task; results in order. The exception of
         a call that failed in ``fn`` is raised as it is (not retried)."""
         ray = self.connect()
-        remote = ray.remote(_call).options(num_gpus=self.gpus_per_task if on_gpu else 0,
-                                           num_cpus=self.cpus_per_task, max_retries=self.max_retries,
-                                           retry_exceptions=False)
+        remote = self.remote_function(ray, _call, on_gpu)
         refs = [remote.remote(fn, args) for args in calls]
         try:
             return ray.get(refs)

@@ -152,3 +152,28 @@ def test_a_campaign_part_records_the_same_samples_on_ray(tmp_path):
 
     assert samples(outs["ray"]) == samples(outs["local"])
     assert len(samples(outs["ray"])) == 4
+
+
+def test_a_gpu_task_gets_a_worker_of_its_own():
+    """Ray names a task's GPU through CUDA_VISIBLE_DEVICES, which CUDA reads once per process: a
+    GPU task must not run in a worker that already started CUDA for another GPU (max_calls=1),
+    while CPU tasks keep reusing their workers."""
+    declared: list[dict] = []
+
+    class FakeRemote:
+        def options(self, **kw):
+            return ("options", kw)
+
+    class FakeRay:
+        def remote(self, *args, **kw):
+            if args and callable(args[0]):  # @ray.remote without arguments
+                declared.append({})
+                return FakeRemote()
+            declared.append(kw)
+            return lambda fn: FakeRemote()
+
+    ex = RayExecutor(address="local", gpus_per_task=1)
+    _, opts = ex.remote_function(FakeRay(), print, on_gpu=True)
+    assert declared[-1].get("max_calls") == 1 and declared[-1].get("num_gpus") == 1 and opts["num_gpus"] == 1
+    _, opts = ex.remote_function(FakeRay(), print, on_gpu=False)
+    assert declared[-1] == {} and opts["num_gpus"] == 0
