@@ -40,6 +40,8 @@ from typing import Any
 
 import numpy as np
 
+from warpdem.json_io import jsonable as _jsonable
+
 #: contact laws of the comparison: sub-models and their parameters (on top of BASE_PARAMETERS)
 LAWS: dict[str, tuple[dict[str, str], dict[str, float]]] = {
     "none": ({"rolling": "none"}, {}),
@@ -402,22 +404,6 @@ def main(argv: list[str] | None = None) -> int:
     (out / "results.md").write_text(markdown(meta, rows, records))
     print(markdown(meta, rows, records))
     return 0
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        return None if not math.isfinite(float(x)) else float(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    return x
 
 
 if __name__ == "__main__":

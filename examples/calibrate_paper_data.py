@@ -52,16 +52,7 @@ from calibration.surrogates import (  # noqa: E402
     relative_errors,
     rmse,
 )
-
-
-def _jsonable(o):
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, tuple):
-        return list(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+from warpdem.json_io import json_default  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -168,7 +159,7 @@ def main(argv: list[str] | None = None) -> dict:
     plot_sensitivity(sob, out / "fig13_sensitivity.png", kind="total", reference=PAPER_SENSITIVITY_PERCENT)
 
     res["runtime_s"] = time.time() - t0
-    (out / "results.json").write_text(json.dumps(res, indent=2, default=_jsonable))
+    (out / "results.json").write_text(json.dumps(res, indent=2, default=json_default))
     (out / "summary.md").write_text(_markdown(res, names, space.names, sob, args))
     print((out / "summary.md").read_text())
     return res

@@ -10,13 +10,14 @@ impacts, region, component, blade zone; :func:`wall_cell_data`).
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+
+from warpdem.json_io import write_json as save_json  # results.json, strict and whole
 
 from .erosion import depth_rate_mm_per_year
 from .geometry import COMPONENTS, REGIONS
@@ -1008,34 +1009,6 @@ def write_html(case, results: dict, figures: dict[str, Path], path: Path) -> Pat
     Report(title=f"Slurry-pump wear prototype: {case.config['name']}", verdict=verdict, sections=sections,
            next_steps=nxt, subtitle="CFD-free CFD-DEM analogue of the seed paper's Sec. 4.4").write(path)
     return path
-
-
-def save_json(path: Path, data: dict) -> None:
-    def conv(o):
-        if isinstance(o, (np.floating, np.integer)):
-            return o.item()
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-        if isinstance(o, Path):
-            return str(o)
-        if isinstance(o, float) and not math.isfinite(o):
-            return None
-        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-
-    def finite(o):  # strict JSON: non-finite floats (an interval of one sample) become null
-        if isinstance(o, dict):
-            return {k: finite(v) for k, v in o.items()}
-        if isinstance(o, (list, tuple)):
-            return [finite(v) for v in o]
-        if isinstance(o, np.ndarray):
-            return finite(o.tolist())
-        if isinstance(o, (float, np.floating)) and not math.isfinite(float(o)):
-            return None
-        return o
-
-    from warpdem.config_io import write_atomic
-
-    write_atomic(path, json.dumps(finite(data), indent=1, default=conv, allow_nan=False))
 
 
 def write_outputs(case, rec, results: dict, out: Path) -> dict[str, Path]:

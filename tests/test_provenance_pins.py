@@ -58,3 +58,12 @@ def test_diagnosis_jsonable_is_pinned():
             1: "int key", "c": {"d": np.array([[1.0, np.inf], [2, 3]])}}
     assert json.dumps(_jsonable(data)) == ('{"a": 0.10000000149011612, "b": [3, [1.5, null]], "e": true, "f": null, '
                                            '"1": "int key", "c": {"d": [[1.0, null], [2.0, 3.0]]}}')
+
+
+def test_json_default_hook_is_pinned():
+    from warpdem.json_io import json_default
+
+    data = {"a": np.float32(0.1), "b": np.array([1, 2]), "t": (1, 2), "n": float("nan"), "k": np.bool_(True)}
+    assert json.dumps(data, indent=2, default=json_default) == (
+        '{\n  "a": 0.10000000149011612,\n  "b": [\n    1,\n    2\n  ],\n  "t": [\n    1,\n    2\n  ],\n'
+        '  "n": NaN,\n  "k": true\n}')

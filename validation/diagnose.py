@@ -59,6 +59,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from calibration.designs import ParameterSpace, latin_hypercube
+from warpdem.json_io import jsonable as _jsonable
 
 from .adequacy import Adequacy
 from .design import DesignData, design_replicates, design_size, evaluate_sets
@@ -223,24 +224,6 @@ class DiagnosisResult:
             "error_history": self.history.to_dict(),
             "next_steps": self.next_steps, "forward_model": self.forward, "seconds": self.seconds,
         })
-
-
-def _jsonable(obj: Any) -> Any:
-    """Convert numpy types and non-finite floats (-> None) for strict JSON."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, (np.bool_, bool)):
-        return bool(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    return obj
 
 
 def _errors(study: ModelStudy, settings: DiagnosisSettings) -> VersionErrors:
