@@ -35,7 +35,8 @@ from .materials import ParticleSample
 
 __all__ = ["Box", "VerticalCylinder", "HorizontalCylinder", "FillResult", "FillError", "random_fill", "pour_fill",
            "check_no_overlap", "add_fill", "member_positions", "SettleReport", "settle", "level",
-           "active_spheres", "active_bodies", "body_tops", "run_for"]
+           "active_spheres", "active_bodies", "body_tops", "run_for", "insertion_region", "poured_fill",
+           "fill_body_ids", "hold_batches", "release_batches"]
 
 
 class FillError(ConfigError):
@@ -137,6 +138,10 @@ class FillResult:
     placed: int = -1
     settled: bool = False
     pours: int = 0
+    #: poured fill (:func:`poured_fill`): each particle's insertion batch (n,), and the height [m]
+    #: batch k waits above its release position (k * ``batch_stride``) until it is released
+    batch: np.ndarray | None = None
+    batch_stride: float = 0.0
 
     def __post_init__(self) -> None:
         if self.placed < 0:
@@ -145,6 +150,11 @@ class FillResult:
     @property
     def complete(self) -> bool:
         return self.placed == self.sample.n
+
+    @property
+    def poured(self) -> bool:
+        """The particles are inserted in batches (:func:`poured_fill`), not placed at once."""
+        return self.batch is not None
 
     @property
     def loose_solids_fraction(self) -> float:
@@ -344,6 +354,151 @@ def pour_fill(region: Region, sample: ParticleSample, add_walls: Callable, rng: 
 def _subset(sample: ParticleSample, k: int) -> ParticleSample:
     return ParticleSample(sample.material, sample.template[:k], sample.radius[:k], sample.bounding_radius[:k],
                           sample.mass[:k], sample.equivalent_diameter[:k])
+
+
+# --------------------------------------------------------------------------- poured fill
+def insertion_region(region: Region, solid_volume: float, d_max: float, inset: float) -> Box | VerticalCylinder:
+    """The insertion region of a poured fill, as the LIGGGHTS decks pour theirs
+    (``_pour_region`` in validation/reference/liggghts_experiments.py): in the upper part of an
+    open ``region`` (box or vertical cylinder), clear of its walls by ``inset`` [m]; from one
+    largest diameter ``d_max`` above an estimate of the settled bed's top (``solid_volume`` [m^3]
+    at a solids fraction of 0.6), max(4 d_max, a quarter of the bed height) high. Closed (the
+    particles lie wholly inside it, LIGGGHTS' ``all_in yes``)."""
+    if isinstance(region, Box):
+        (x0, y0, z0), (x1, y1, _) = region.lower, region.upper
+        bed = z0 + solid_volume / 0.6 / ((x1 - x0) * (y1 - y0))
+        lo = bed + d_max
+        hi = lo + max(4.0 * d_max, 0.25 * (bed - z0))
+        return Box((x0 + inset, y0 + inset, lo), (x1 - inset, y1 - inset, hi), open_top=False)
+    if isinstance(region, VerticalCylinder):
+        R, z0 = region.radius, region.z0
+        bed = z0 + solid_volume / 0.6 / (math.pi * R**2)
+        lo = bed + d_max
+        hi = lo + max(4.0 * d_max, 0.25 * (bed - z0))
+        return VerticalCylinder(region.center, R - inset, lo, hi, open_top=False)
+    raise FillError(f"poured fill: no insertion region for a {type(region).__name__} (a box or a vertical cylinder "
+                    "open at the top)")
+
+
+def region_volume(region: Box | VerticalCylinder) -> float:
+    """Volume [m^3] of a box or a vertical cylinder."""
+    lo, hi = region.bounds
+    if isinstance(region, VerticalCylinder):
+        return math.pi * region.radius**2 * (region.z1 - region.z0)
+    return float(np.prod(hi - lo))
+
+
+def poured_fill(region: Region, insert: Box | VerticalCylinder, sample: ParticleSample, batch_volume: float,
+                rng: np.random.Generator | int | None = None, gap: float | None = None) -> FillResult:
+    """A poured fill (LIGGGHTS' ``insert/rate/region``): ``sample`` split in order into insertion
+    batches of at most ``batch_volume`` [m^3] of solid each (to one particle: particle i joins batch
+    ceil(V_i / batch_volume) - 1 by the cumulative solid volume V_i), each batch placed by
+    :func:`random_fill` inside the closed insertion region ``insert`` (no overlap within the batch).
+    Batch k waits k x ``batch_stride`` above its release position (the region's height and one
+    largest diameter: the waiting batches never overlap) until the protocol releases it
+    (:func:`release_batches`); ``positions`` are the waiting positions, ``top`` the highest top at
+    release. ``region``: the experiment's fill region (its floor is the fill's)."""
+    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    if not batch_volume > 0:
+        raise FillError(f"poured fill: batch volume must be > 0 m^3, got {batch_volume}")
+    vol = sample.mass / sample.material.particle.density
+    batch = np.maximum(np.ceil(np.cumsum(vol) / batch_volume - 1e-9).astype(np.int64) - 1, 0)
+    lo, hi = insert.bounds
+    stride = float(hi[2] - lo[2]) + 2.0 * float(sample.bounding_radius.max())
+    pos = np.empty((sample.n, 3))
+    rot = np.empty((sample.n, 4))
+    for k in np.unique(batch):
+        idx = np.nonzero(batch == k)[0]
+        part = random_fill(insert, _select(sample, idx), rng, gap=gap)
+        pos[idx] = part.positions + np.array([0.0, 0.0, k * stride])
+        rot[idx] = part.rotations
+    res = FillResult(sample, pos, rot, 0.0, False, region, batch=batch, batch_stride=stride)
+    x, r, owner = member_positions(res)
+    top = float(np.max(x[:, 2] + r - batch[owner] * stride))
+    res = FillResult(sample, pos, rot, top, bool(top > region.bounds[1][2] + 1e-12), region, batch=batch,
+                     batch_stride=stride)
+    check_no_overlap(res)
+    return res
+
+
+def _select(sample: ParticleSample, idx: np.ndarray) -> ParticleSample:
+    return ParticleSample(sample.material, sample.template[idx], sample.radius[idx], sample.bounding_radius[idx],
+                          sample.mass[idx], sample.equivalent_diameter[idx])
+
+
+def fill_body_ids(model, world: int, sample: ParticleSample) -> np.ndarray:
+    """Body ids of ``world``'s particles in the order of ``sample`` (a world built by
+    :func:`add_fill` alone: spheres first, then clumps template by template)."""
+    order = [np.nonzero(sample.template < 0)[0]]
+    order += [np.nonzero(sample.template == k)[0] for k in np.unique(sample.template[sample.template >= 0])]
+    order = np.concatenate(order)
+    bodies = np.nonzero(model.host["body_world"] == world)[0]
+    if len(bodies) != sample.n:
+        raise FillError(f"world {world} holds {len(bodies)} bodies, its fill {sample.n} particles")
+    ids = np.empty(sample.n, dtype=np.int64)
+    ids[order] = bodies
+    return ids
+
+
+def hold_batches(sim, bodies: np.ndarray) -> None:
+    """Take ``bodies`` (waiting insertion batches) out of play: inactive, frozen where they wait."""
+    active = sim.state.body_active.numpy().copy()
+    active[np.asarray(bodies, dtype=np.int64)] = 0
+    sim.state.body_active.assign(active)
+    sim.solver.invalidate_views()
+
+
+def release_batches(sim, bodies: np.ndarray, drop: np.ndarray, gap: float = 0.0) -> np.ndarray:
+    """Insert waiting bodies (LIGGGHTS' ``overlapcheck yes``, ``vel constant 0 0 0``): in the
+    given order, each body is moved down by its ``drop`` [m] and made active at rest, unless one
+    of its spheres would then overlap (closer than the radii and ``gap``) an active sphere of its
+    world or one inserted before it in this call; such a body keeps waiting where it is. Host-side
+    (between chunks of steps); returns the mask of the bodies inserted."""
+    bodies = np.asarray(bodies, dtype=np.int64)
+    drop = np.asarray(drop, dtype=float)
+    h = sim.model.host
+    x = sim.sphere_positions()
+    q = sim.state.body_q.numpy().copy()
+    active = sim.state.body_active.numpy().copy()
+    sb, sr, sw = h["sphere_body"], h["sphere_radius"].astype(float), h["sphere_world"]
+    first, count = h["body_first"], h["body_count"]
+    done = np.zeros(len(bodies), dtype=bool)
+    for w in np.unique(h["body_world"][bodies]):
+        on = (active[sb] != 0) & (sw == w)
+        xa, ra = x[on], sr[on]
+        tree = cKDTree(xa) if len(xa) else None
+        ra_max = float(ra.max()) if len(ra) else 0.0
+        new_x, new_r = np.zeros((0, 3)), np.zeros(0)
+        for j in np.nonzero(h["body_world"][bodies] == w)[0]:
+            b = bodies[j]
+            s = slice(int(first[b]), int(first[b] + count[b]))
+            xm = x[s] - np.array([0.0, 0.0, drop[j]])
+            rm = sr[s]
+            clear = True
+            if tree is not None:
+                for xi, ri, near in zip(xm, rm, tree.query_ball_point(xm, rm + ra_max + gap)):
+                    if near and np.any(np.linalg.norm(xa[near] - xi, axis=1) < ri + ra[near] + gap):
+                        clear = False
+                        break
+            if clear and len(new_r):
+                d = np.linalg.norm(xm[:, None, :] - new_x[None, :, :], axis=2)
+                clear = bool(np.all(d >= rm[:, None] + new_r[None, :] + gap))
+            if clear:
+                done[j] = True
+                new_x, new_r = np.concatenate([new_x, xm]), np.concatenate([new_r, rm])
+    moved = bodies[done]
+    if moved.size:
+        q[moved, 2] = (q[moved, 2].astype(float) - drop[done]).astype(np.float32)
+        active[moved] = 1
+        sim.state.body_q.assign(q)
+        for arr in (sim.state.body_v, sim.state.body_w):
+            v = arr.numpy().copy()
+            v[moved] = 0.0
+            arr.assign(v)
+        sim.state.body_active.assign(active)
+        sim.solver.invalidate_views()
+        sim.solver.request_neighbour_rebuild()  # the inserted spheres enter the neighbour lists
+    return done
 
 
 def add_fill(builder, fill: FillResult, material, world: int) -> np.ndarray:

@@ -153,9 +153,9 @@ class BaffleBox(Experiment):
         nw = ctx.num_worlds
         box = self.remove_box()
         out: list[dict[str, Any]] = [dict() for _ in range(nw)]
-        # Fill: settle under gravity until KE/particle < 1e-6 J or 1.5 s (spec A "Fill")
-        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
-        ctx.settle("fill_settle", t_max, t_min, box)
+        # Fill: settle under gravity until KE/particle < 1e-6 J or 1.5 s (spec A "Fill"); with
+        # fill_mode poured the batches are poured first (Experiment.pour)
+        self.settle_fill(ctx, box)
         # level the surface if a levelling height is given (spec A "Fill")
         if self.level_height is not None:
             removed = ctx.once("level", lambda: level(ctx.sim, self.level_height))

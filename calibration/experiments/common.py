@@ -39,7 +39,8 @@ from warpdem.config_io import BYTES_PER_SPHERE as _BYTES_PER_SPHERE
 from warpdem.config_io import machine_memory
 
 from ..executor import LocalExecutor, RayExecutor
-from ..filling import FillError, FillResult, add_fill, pour_fill, random_fill
+from ..filling import (Box, FillError, FillResult, VerticalCylinder, add_fill, fill_body_ids, hold_batches,
+                       insertion_region, pour_fill, poured_fill, random_fill, region_volume, release_batches)
 from ..materials import BulkMaterial, sample_particles
 from .checkpoints import BatchCheckpoint, BatchCheckpoints, clear_checkpoints, decode_value
 from .results_json import jsonable as _jsonable
@@ -60,6 +61,33 @@ BYTES_PER_SPHERE = _BYTES_PER_SPHERE
 #: family's largest) 0.14. The walls' height and the motion start follow the column this bound
 #: allows (:meth:`Experiment.loose_top_bound`); a fill that rises above it is refused.
 LOOSE_SOLIDS_FRACTION_BOUND = 0.10
+#: the fills an experiment can start from (``fill_mode``): "loose" (a random-sequential-addition
+#: column, settled) or "poured" (batches inserted at rest and poured, as LIGGGHTS' insert/rate/region)
+FILL_MODES = ("loose", "poured")
+#: the largest ``pour_batch_fraction`` (random sequential addition jams near 0.3 of the volume)
+MAX_POUR_BATCH_FRACTION = 0.3
+
+
+@dataclass(frozen=True)
+class PourPlan:
+    """The schedule of a poured fill (:meth:`Experiment.pour_plan`): the insertion region (closed
+    box or vertical cylinder) and its volume [m^3], the solid volume per batch [m^3], the number
+    of batch times (from the most mass a fill can hold), the interval between them [s], the
+    region's top and the fill's floor [m] and the free fall from that top to the floor [s]."""
+
+    region: Box | VerticalCylinder
+    volume: float
+    batch_volume: float
+    batches: int
+    interval: float
+    top: float
+    floor: float
+    t_fall: float
+
+    @property
+    def duration(self) -> float:
+        """Simulated time [s] of the pour before the fill settles: one interval per batch time."""
+        return self.batches * self.interval
 
 
 # --------------------------------------------------------------------------- meshes
@@ -218,6 +246,13 @@ class Experiment:
         A run that writes VTK runs in one process.
     seed: fill RNG seed. fill_per_world: a different loose fill in every world (default: the
         same fill everywhere); world w's fill is seeded by (seed, first_fill_index + w).
+    fill_mode: "loose" (default: a random-sequential-addition column in the fill region, settled)
+        or "poured" (as LIGGGHTS' ``insert/rate/region`` in the project's decks: batches of
+        ``pour_batch_fraction`` of the insertion region's volume as solid, placed without overlap
+        in the insertion region (the upper part of the fill region, :meth:`pour_plan`), released at
+        rest one every ``max(pour_interval, free fall through the region's height)`` s, a particle
+        that would overlap one in play kept back to the next batch time; then settled as a loose
+        fill, at least the free fall from the region's top). Box and vertical cylinder only.
     """
 
     name: ClassVar[str] = "experiment"
@@ -249,6 +284,9 @@ class Experiment:
     vtk_every: float | None = None
     vtk_world: int = 0
     vtk_folder: str | None = None
+    fill_mode: str = "loose"
+    pour_batch_fraction: float = 0.10
+    pour_interval: float = 0.1
 
     # ------------------------------------------------------------------ config
     @classmethod
@@ -311,6 +349,16 @@ class Experiment:
         if not isinstance(self.contact_defaults, Mapping):
             raise ConfigError(f"{self.name}: contact_defaults must be a mapping of parameter names to values")
         self.validate()
+        if self.fill_mode not in FILL_MODES:
+            raise ConfigError(f"{self.name}: fill_mode must be one of {list(FILL_MODES)} ('loose': a random column "
+                              f"settled; 'poured': batches poured as LIGGGHTS inserts them), got {self.fill_mode!r}")
+        self._check_positive("pour_batch_fraction", "pour_interval")
+        if self.pour_batch_fraction > MAX_POUR_BATCH_FRACTION:
+            raise ConfigError(f"{self.name}: pour_batch_fraction must be at most {MAX_POUR_BATCH_FRACTION} (solid "
+                              f"volume per batch / insertion region volume), got {self.pour_batch_fraction}")
+        if self.fill_mode == "poured" and not self.fill_region().open_top:
+            raise ConfigError(f"{self.name}: fill_mode 'poured' needs a fill region open at the top (the baffle box, "
+                              f"the hollow cylinder); this experiment's is closed: use fill_mode 'loose'")
 
     def validate(self) -> None:
         """Experiment-specific checks (override)."""
@@ -435,6 +483,9 @@ class Experiment:
         """Loose fill (spec "Fill"); a closed region that one pass cannot hold is poured in stages."""
         sample = sample_particles(material, rng=rng, **self.fill_amount(material))
         region = self.fill_region()
+        if self.fill_mode == "poured":
+            plan = self.pour_plan(material)
+            return poured_fill(region, plan.region, sample, plan.batch_volume, rng)
         if region.open_top:
             return random_fill(region, sample, rng)
         return pour_fill(region, sample, self.fill_walls, rng, device, self.ke_per_particle,
@@ -444,6 +495,9 @@ class Experiment:
         """(min_time, max_time) [s] of the fill's settling: at least the free-fall time of the
         loose column's top; the spec's maximum is extended by it when the column stands above
         the walls' nominal height."""
+        if self.fill_mode == "poured":  # as the LIGGGHTS decks: the fall from the insertion region's top
+            t_fall = self.pour_plan(self.bulk_material()).t_fall
+            return t_fall, self.fill_settle_max_time + t_fall
         floor = min(f.region.bounds[0][2] for f in fills)
         t_fall = max(math.sqrt(2.0 * max(f.top - floor, 0.0) / G) for f in fills)
         extra = t_fall if any(f.above_region for f in fills) else 0.0
@@ -473,6 +527,8 @@ class Experiment:
         follow it (the fills are checked against it: :meth:`check_fill_tops`)."""
         region = self.fill_region()
         lo, hi = region.bounds
+        if self.fill_mode == "poured":  # the walls contain the insertion region
+            return float(max(hi[2], self.pour_plan(material).top))
         if not region.open_top:
             return float(hi[2])
         area = (math.pi * region.radius ** 2 if hasattr(region, "radius")
@@ -496,9 +552,82 @@ class Experiment:
         (``fill_settle_max_time``, and the free fall of :meth:`loose_top_bound` when that stands
         above the region; each world settles by its own fill, :meth:`fill_settle_times_per_world`),
         whatever fills a batch drew."""
+        if self.fill_mode == "poured":
+            plan = self.pour_plan(material)
+            return plan.duration + self.fill_settle_max_time + plan.t_fall
         lo, hi = self.fill_region().bounds
         top = self.loose_top_bound(material)
         return self.fill_settle_max_time + (math.sqrt(2.0 * (top - lo[2]) / G) if top > hi[2] + 1e-12 else 0.0)
+
+    def pour_plan(self, material: BulkMaterial) -> PourPlan:
+        """The poured fill's schedule (``fill_mode: poured``), as the LIGGGHTS decks pour
+        (validation/reference/liggghts_experiments.py): the insertion region
+        (:func:`~calibration.filling.insertion_region` of the fill amount, inset from the walls by
+        half the smallest radius (the decks' neighbour skin) and 1 mm); batches of
+        ``pour_batch_fraction`` of its volume as solid, as many batch times as the most mass a fill
+        can hold needs (:meth:`max_fill_mass`: the schedule follows the settings and the material,
+        not the fill drawn); the interval is ``pour_interval`` (the decks' 0.1 s) or the free fall
+        through the region's height if longer, so a batch released at rest has fallen out of the
+        region before the next one is released."""
+        region = self.fill_region()
+        amount = self.fill_amount(material)
+        density = material.particle.density
+        mass = float(amount["mass"]) if "mass" in amount else float(amount["n"]) * material.mean_particle_mass
+        inset = 0.5 * material.smallest_sphere[0] + 1.0e-3
+        insert = insertion_region(region, mass / density, 2.0 * material.max_bounding_radius, inset)
+        volume = region_volume(insert)
+        batch_volume = float(self.pour_batch_fraction) * volume
+        batches = max(1, int(math.ceil(self.max_fill_mass(material) / density / batch_volume)))
+        lo, hi = insert.bounds
+        floor = float(region.bounds[0][2])
+        interval = max(float(self.pour_interval), math.sqrt(2.0 * float(hi[2] - lo[2]) / G))
+        return PourPlan(insert, volume, batch_volume, batches, interval, float(hi[2]), floor,
+                        math.sqrt(2.0 * (float(hi[2]) - floor) / G))
+
+    def settle_fill(self, ctx: RunContext, remove_box=None):
+        """The fill phase of a protocol: pour (``fill_mode: poured``, :meth:`pour`), then settle
+        (spec "Fill": KE per particle below ``ke_per_particle``, :meth:`fill_settle_times_per_world`)."""
+        if self.fill_mode == "poured":
+            self.pour(ctx, remove_box)
+        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
+        return ctx.settle("fill_settle", t_max, t_min, remove_box)
+
+    def pour(self, ctx: RunContext, remove_box=None) -> None:
+        """Pour a poured fill: batch 0 falls from the start, the others wait out of play
+        (inactive, above the region); after each interval every waiting particle of the batches
+        due is inserted at rest where it overlaps none in play
+        (:func:`~calibration.filling.release_batches`), the rest waits for the next batch time.
+        Every world on the same clock (:meth:`pour_plan`); the particles still waiting after the
+        last batch time stay out (as LIGGGHTS leaves what its overlap check refuses), counted in
+        ``pour_not_inserted``."""
+        plan = self.pour_plan(self.bulk_material())
+        nw, model = ctx.num_worlds, ctx.model
+        fills = [ctx.fill(w) for w in range(nw)]
+        ids = np.concatenate([fill_body_ids(model, w, f.sample) for w, f in enumerate(fills)])
+        batch = np.concatenate([f.batch for f in fills])
+        drop = np.concatenate([f.batch * f.batch_stride for f in fills])
+        world = model.host["body_world"][ids]
+        q0 = model.initial["body_q"][ids]
+        ctx.once("pour_hold", lambda: hold_batches(ctx.sim, ids[batch > 0]))
+
+        def release(k: int) -> list[list[int]]:
+            q = ctx.sim.state.body_q.numpy()[ids]
+            waiting = (ctx.sim.state.body_active.numpy()[ids] == 0) & np.all(q == q0, axis=1) & (batch > 0)
+            due = np.nonzero(waiting & (batch <= k))[0]
+            done = release_batches(ctx.sim, ids[due], drop[due])
+            left = waiting.copy()
+            left[due[done]] = False
+            return [[int(np.count_nonzero(world[due[done]] == w)), int(np.count_nonzero(left & (world == w)))]
+                    for w in range(nw)]
+
+        counts = [[0, 0] for _ in range(nw)]
+        for k in range(1, plan.batches + 1):
+            ctx.advance("pour", plan.interval, remove_box)
+            counts = ctx.once("pour_release", lambda k=k: release(k))
+        for w in range(nw):
+            ctx.diag[w].update(pour_batches=int(fills[w].batch.max()) + 1, pour_batch_times=plan.batches,
+                               pour_interval_s=plan.interval, pour_region_top_m=plan.top,
+                               pour_not_inserted=int(counts[w][1]))
 
     def _run_in_processes(self, parameter_sets: list, device: str | None, nproc: int,
                           checkpoints: BatchCheckpoints | None = None,

@@ -140,8 +140,8 @@ class HollowCylinder(Experiment):
         nw = ctx.num_worlds
         box = self.remove_box()
         # Fill: settled and levelled as in A (spec C "Fill")
-        t_min, t_max = self.fill_settle_times_per_world(ctx.fills, ctx.num_worlds)
-        ctx.settle("fill_settle", t_max, t_min, box)
+        # (fill_mode poured: poured in batches first, Experiment.pour)
+        self.settle_fill(ctx, box)
         if self.level_height is not None:
             removed = ctx.once("level", lambda: level(ctx.sim, self.level_height))
             for w in range(nw):
