@@ -29,13 +29,13 @@ import hashlib
 import importlib.util
 import inspect
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from warpdem import ConfigError
 from warpdem.config_io import write_atomic  # noqa: F401 - re-exported: campaign files written whole
+from warpdem.provenance import fingerprint, plain, sha256_file  # noqa: F401 - fingerprint, plain re-exported
 
 __all__ = ["RECORD_FORMAT", "SETUP_LABELS", "append_records", "code_version", "describe_differences",
            "fingerprint", "is_campaign_record", "plugin_hashes", "read_records", "write_atomic"]
@@ -54,13 +54,9 @@ ENGINE_SOURCES: dict[str, tuple[str, ...]] = {
     "calibration": ("experiments/*.py", "filling.py", "materials.py", "model_description.py", "measurement/*.py"),
 }
 SOURCES_LEFT_OUT = {"warpdem/cli.py", "warpdem/bench_settled_bed.py",
-                    "warpdem/config_io.py", "warpdem/record_files.py",
+                    "warpdem/config_io.py", "warpdem/record_files.py", "warpdem/json_io.py", "warpdem/provenance.py",
                     "calibration/experiments/cli.py", "calibration/experiments/report.py",
                     "calibration/measurement/cli.py", "calibration/measurement/render.py"}
-
-
-def _sha256_file(path: str | os.PathLike) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 @functools.lru_cache(maxsize=1)
@@ -101,40 +97,16 @@ def plugin_hashes(plugins: Sequence[str], contact_law: Any = None) -> dict[str, 
         if not path.exists():
             spec = importlib.util.find_spec(p)
             path = Path(spec.origin) if spec is not None and spec.origin else None
-        out[Path(p).name if p.endswith(".py") else p] = _sha256_file(path)[:16] if path else "not found"
+        out[Path(p).name if p.endswith(".py") else p] = sha256_file(path)[:16] if path else "not found"
     for cls in getattr(contact_law, "implementation", ()):
         module = cls.__module__
         if module.startswith("warpdem.") or module in out:
             continue
         try:
-            out[module] = _sha256_file(inspect.getsourcefile(cls))[:16]
+            out[module] = sha256_file(inspect.getsourcefile(cls))[:16]
         except (TypeError, OSError):
             out[module] = "source not found"
     return dict(sorted(out.items()))
-
-
-def plain(x: Any, numbers_as_float: bool = False) -> Any:
-    """``x`` as plain JSON values (tuples -> lists, numpy -> Python; with ``numbers_as_float`` an
-    integer becomes a float, so ``30`` and ``30.0`` in a config are the same setting)."""
-    if isinstance(x, Mapping):
-        return {str(k): plain(v, numbers_as_float) for k, v in sorted(x.items(), key=lambda kv: str(kv[0]))}
-    if isinstance(x, (list, tuple)):
-        return [plain(v, numbers_as_float) for v in x]
-    if hasattr(x, "tolist") and not isinstance(x, (str, bytes)):  # numpy scalars and arrays
-        return plain(x.tolist(), numbers_as_float)
-    if isinstance(x, bool) or x is None or isinstance(x, str):
-        return x
-    if isinstance(x, int):
-        return float(x) if numbers_as_float else x
-    if isinstance(x, float):
-        return x if math.isfinite(x) else str(x)
-    return str(x)
-
-
-def fingerprint(determined_by: Mapping[str, Any]) -> str:
-    """SHA-256 of the canonical JSON of ``determined_by`` (first 20 hex digits)."""
-    text = json.dumps(plain(determined_by), sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
 def _short(x: Any, limit: int = 160) -> str:

@@ -67,3 +67,11 @@ def test_json_default_hook_is_pinned():
     assert json.dumps(data, indent=2, default=json_default) == (
         '{\n  "a": 0.10000000149011612,\n  "b": [\n    1,\n    2\n  ],\n  "t": [\n    1,\n    2\n  ],\n'
         '  "n": NaN,\n  "k": true\n}')
+
+
+def test_helper_modules_leave_the_code_version_alone():
+    """The JSON and digest helpers cannot change a DEM angle: they are not part of the source hash
+    that tells a cached world's code (an edit to them must not orphan the DEM caches)."""
+    from calibration.campaign_records import SOURCES_LEFT_OUT
+
+    assert {"warpdem/json_io.py", "warpdem/provenance.py"} <= SOURCES_LEFT_OUT

@@ -11,7 +11,6 @@ cache holds simulations only, never measurements.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import sys
@@ -28,6 +27,7 @@ from calibration.experiments.checkpoints import BatchCheckpoints
 from calibration.materials import BulkMaterial
 from calibration.model_description import ModelDescription
 from warpdem import ConfigError
+from warpdem.provenance import json_digest
 from warpdem.record_files import RecordFile
 
 from .dem_effects import DEMEffect, apply_effects
@@ -66,7 +66,9 @@ NEAR_PARAMETER_RTOL = 1e-9
 
 
 def _fingerprint(obj: Any) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:20]
+    """A world's or a setup's id in the DEM cache (:func:`warpdem.provenance.json_digest`, unknown
+    objects by ``str``): the ids of the caches already written depend on it."""
+    return json_digest(obj, default=str)
 
 
 class DEMForwardModel(ForwardModel):

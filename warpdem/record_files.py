@@ -15,7 +15,6 @@ kept in ``<file>.torn``, so nothing is lost.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -25,6 +24,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 from .config_io import write_atomic
 from .errors import ConfigError
+from .provenance import json_digest
 
 __all__ = ["HEADER_KEY", "NotARecordFile", "RecordFile", "header_line", "is_header"]
 
@@ -36,7 +36,7 @@ class NotARecordFile(ConfigError):
 
 
 def _header_fingerprint(kind: str, created: str) -> str:
-    return hashlib.sha256(json.dumps({HEADER_KEY: kind, "created": created}, sort_keys=True).encode()).hexdigest()[:20]
+    return json_digest({HEADER_KEY: kind, "created": created})
 
 
 def header_line(kind: str) -> str:
