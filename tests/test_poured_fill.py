@@ -136,3 +136,24 @@ def test_poured_fill_packs_denser_than_the_loose_one():
         assert all(r.bulk_density is not None for r in res), [r.error for r in res]
         rho[mode] = np.array([r.bulk_density for r in res])
     assert rho["poured"].mean() > rho["loose"].mean() + 15.0, rho
+
+
+def test_poured_cylinder_fill_ends_inside_the_tube(monkeypatch):
+    exp = HollowCylinder.from_config("quick", fill_mass=1.0, fill_mode="poured", lift_speed=0.5,
+                                     max_time_after_lift=0.3)
+    seen = []
+    real_plan = HollowCylinder._lift_plan
+
+    def plan(self, ctx):
+        seen.append(ctx.world_spheres(0))
+        return real_plan(self, ctx)
+
+    monkeypatch.setattr(HollowCylinder, "_lift_plan", plan)
+    (r,) = exp.run([FRICTION], device="cpu")
+    assert r.ok, r.error
+    assert r.diagnostics["pour_batch_times"] == r.diagnostics["pour_batches"] > 1
+    assert r.diagnostics["pour_not_inserted"] == 0
+    xs, rs = seen[0]
+    assert len(xs) == r.protocol["fill"]["particles_per_world"]
+    assert np.all(np.hypot(xs[:, 0], xs[:, 1]) + rs < 0.5 * exp.diameter + 1e-3) and np.all(xs[:, 2] - rs > -1e-3)
+    assert r.protocol["fill"]["loose_top_bound_m"] >= exp.pour_plan(exp.bulk_material()).top
