@@ -157,3 +157,14 @@ def test_poured_cylinder_fill_ends_inside_the_tube(monkeypatch):
     assert len(xs) == r.protocol["fill"]["particles_per_world"]
     assert np.all(np.hypot(xs[:, 0], xs[:, 1]) + rs < 0.5 * exp.diameter + 1e-3) and np.all(xs[:, 2] - rs > -1e-3)
     assert r.protocol["fill"]["loose_top_bound_m"] >= exp.pour_plan(exp.bulk_material()).top
+
+
+def test_a_poured_world_does_not_depend_on_its_batch():
+    """The pour's schedule follows the settings and the material, and each world's batches are
+    released against its own particles: a world alone and in a batch of two pour alike, bit for bit."""
+    kw = dict(fill_mass=1.0, fill_mode="poured", lift_speed=0.5, max_time_after_lift=0.2, fill_per_world=True)
+    pair = HollowCylinder.from_config("quick", **kw).run([FRICTION, dict(mu_s_pp=0.3, mu_s_pw=0.3)], device="cpu")
+    (alone,) = HollowCylinder.from_config("quick", **kw).run([FRICTION], device="cpu")
+    assert pair[0].ok and alone.ok, (pair[0].error, alone.error)
+    assert np.array_equal(pair[0].particles[0], alone.particles[0])
+    assert pair[0].observables == alone.observables
