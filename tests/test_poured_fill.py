@@ -168,3 +168,24 @@ def test_a_poured_world_does_not_depend_on_its_batch():
     assert pair[0].ok and alone.ok, (pair[0].error, alone.error)
     assert np.array_equal(pair[0].particles[0], alone.particles[0])
     assert pair[0].observables == alone.observables
+
+
+def test_a_poured_batch_killed_mid_pour_continues_from_its_checkpoint(tmp_path, monkeypatch):
+    """The pour's steps (hold, advance, release) resume from a batch checkpoint: killed mid-pour after
+    a batch was released, the batch ends as the uninterrupted one, bit for bit."""
+    from calibration.experiments.checkpoints import BatchCheckpoints
+    from tests.test_batch_checkpoint import Killed, kill_after_save, outcome
+
+    kw = dict(fill_mass=1.0, fill_mode="poured", lift_speed=0.5, max_time_after_lift=0.2, fill_per_world=True)
+    sets = [FRICTION, dict(mu_s_pp=0.3, mu_s_pw=0.3)]
+    reference = HollowCylinder.from_config("quick", **kw).run(sets, device="cpu")
+    folder = tmp_path / "ck"
+    saves = kill_after_save(monkeypatch, 5)  # two saves per 0.12 s interval (0.05 s chunks): in the third, after two releases
+    with pytest.raises(Killed):
+        HollowCylinder.from_config("quick", **kw).run(sets, device="cpu", checkpoints=BatchCheckpoints(folder, 1e-9))
+    assert saves[-1][0] == "advance:pour"
+    monkeypatch.undo()
+    resumed = HollowCylinder.from_config("quick", **kw).run(sets, device="cpu", checkpoints=BatchCheckpoints(folder, 1e9))
+    assert resumed[0].timing["checkpoint"]["resumed"]["in_step"] == "advance:pour"
+    assert outcome(resumed) == outcome(reference)
+    assert all(np.array_equal(a.particles[0], b.particles[0]) for a, b in zip(resumed, reference))
