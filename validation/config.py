@@ -34,16 +34,18 @@ Every problem is reported at once with its path in the file (``parameters.mu_s_p
 """
 from __future__ import annotations
 
-import math
+import dataclasses
 import os
 from pathlib import Path
 from typing import Annotated, Optional, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
 from warpdem import ConfigError
 from warpdem.config_io import check_device, load_config_file, parse_processes
 from warpdem.config_schema import Flag, Number, Pair, Text, WholeNumber
+
+from .settings import BOUNDS, DiagnosisSettings
 
 #: a finite number >= 0
 NonNegativeNumber = Annotated[Number, Field(ge=0)]
@@ -71,32 +73,8 @@ class ProposalSection(_Strict):
     lab_hours: Optional[Number] = Field(None, gt=0)  # None: from the experiment's LAB_SETTINGS / LAB_EFFORT
 
 
-class DiagnosisSection(_Strict):
-    design_points_per_parameter: WholeNumber = Field(8, ge=1)
-    min_design_points: WholeNumber = Field(16, ge=4)
-    replicates: WholeNumber = Field(2, ge=2)
-    replicated_fraction: Number = Field(1.0, gt=0, le=1)
-    confirm_replicates: WholeNumber = Field(3, ge=1)
-    confirm_extra_replicates: WholeNumber = Field(2, ge=0)
-    refine_points: WholeNumber = Field(8, ge=0)
-    max_refine_waves: WholeNumber = Field(5, ge=0)
-    scan_points: WholeNumber = Field(2 ** 14, ge=64)
-    evidence_samples: WholeNumber = Field(2 ** 13, ge=256)
-    cutoff: Number = Field(3.0, gt=0)
-    within_sigma: Number = Field(2.0, gt=0)
-    tie_log_bayes: Number = Field(math.log(3.0), gt=0)
-    separation_sigma: Number = Field(2.0, gt=0)
-    strong_log_bayes: Number = Field(3.0, gt=0)
-    max_added_effects: WholeNumber = Field(2, ge=0)
-    rank_when_adequate: Flag = False
-    model_discrepancy: Union[Literal["fidelity", "none"], dict[str, NonNegativeNumber]] = "fidelity"
-    max_conflict_size: WholeNumber = Field(3, ge=1)
-    gp_restarts: WholeNumber = Field(2, ge=0)
-    cv_folds: WholeNumber = Field(5, ge=2)
-    seed: WholeNumber = Field(0, ge=0)
-    designs_up_front: Union[bool, Literal["auto"]] = "auto"
-
-    @field_validator("designs_up_front", mode="before")
+class _DiagnosisSectionChecks(_Strict):
+    @field_validator("designs_up_front", mode="before", check_fields=False)
     @classmethod
     def _auto_true_false(cls, v: Any) -> Any:
         if isinstance(v, bool) or v == "auto":
@@ -104,6 +82,25 @@ class DiagnosisSection(_Strict):
         if v in ("true", "false"):  # quoted in the YAML
             return v == "true"
         raise ValueError("must be auto, true or false")
+
+
+#: the schema of a setting's type in the config (a type not listed here needs a line below)
+_SETTING_TYPES: dict[str, Any] = {
+    "int": WholeNumber, "float": Number, "bool": Flag,
+    "str | Mapping[str, float]": Union[Literal["fidelity", "none"], dict[str, NonNegativeNumber]],
+    "bool | str": Union[bool, Literal["auto"]],
+}
+
+
+def _diagnosis_section() -> type[_Strict]:
+    """The ``diagnosis:`` section: one field per :class:`DiagnosisSettings` field (its default and
+    bounds, :data:`validation.settings.BOUNDS`) but ``add``, a key of its own at the top level."""
+    section = {f.name: (_SETTING_TYPES[f.type], Field(f.default, **f.metadata.get(BOUNDS, {})))
+               for f in dataclasses.fields(DiagnosisSettings) if f.name != "add"}
+    return create_model("DiagnosisSection", __base__=_DiagnosisSectionChecks, __module__=__name__, **section)
+
+
+DiagnosisSection = _diagnosis_section()
 
 
 class DiagnosisConfig(_Strict):

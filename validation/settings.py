@@ -1,13 +1,24 @@
-"""Settings of a diagnosis (plain data; every threshold documented where it is used)."""
+"""Settings of a diagnosis (plain data; every threshold documented where it is used). The one
+declaration of each setting: its type, default and bounds; the config's ``diagnosis:`` section
+(:class:`validation.config.DiagnosisSection`) is derived from these fields."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from types import MappingProxyType
 from typing import Mapping
 
-__all__ = ["DiagnosisSettings"]
+__all__ = ["BOUNDS", "DiagnosisSettings"]
+
+#: a field's metadata key: its bounds (``ge``, ``gt``, ``le``), checked here and by the config
+#: (:class:`validation.config.DiagnosisSection` is built from these fields: a setting is declared once)
+BOUNDS = "bounds"
+
+
+def _setting(default, **bounds):
+    """A setting with its default and its ``bounds`` (:data:`BOUNDS`)."""
+    return field(default=default, metadata={BOUNDS: bounds})
 
 
 def _int(name: str, v, lo: int) -> None:
@@ -82,50 +93,40 @@ class DiagnosisSettings:
         cost the same either way and an adequate base model would waste the candidates' designs.
     """
 
-    design_points_per_parameter: int = 8
-    min_design_points: int = 16
-    replicates: int = 2
-    confirm_replicates: int = 3
-    confirm_extra_replicates: int = 2
-    refine_points: int = 8
-    max_refine_waves: int = 5
-    scan_points: int = 2 ** 14
-    evidence_samples: int = 2 ** 13
-    cutoff: float = 3.0
-    within_sigma: float = 2.0
-    tie_log_bayes: float = math.log(3.0)
-    separation_sigma: float = 2.0
-    strong_log_bayes: float = 3.0
-    max_added_effects: int = 2
+    design_points_per_parameter: int = _setting(8, ge=1)
+    min_design_points: int = _setting(16, ge=4)
+    replicates: int = _setting(2, ge=2)
+    confirm_replicates: int = _setting(3, ge=1)
+    confirm_extra_replicates: int = _setting(2, ge=0)
+    refine_points: int = _setting(8, ge=0)
+    max_refine_waves: int = _setting(5, ge=0)
+    scan_points: int = _setting(2 ** 14, ge=64)
+    evidence_samples: int = _setting(2 ** 13, ge=256)
+    cutoff: float = _setting(3.0, gt=0)
+    within_sigma: float = _setting(2.0, gt=0)
+    tie_log_bayes: float = _setting(math.log(3.0), gt=0)
+    separation_sigma: float = _setting(2.0, gt=0)
+    strong_log_bayes: float = _setting(3.0, gt=0)
+    max_added_effects: int = _setting(2, ge=0)
     add: tuple[str, ...] = ()
     rank_when_adequate: bool = False
     model_discrepancy: str | Mapping[str, float] = "fidelity"
-    max_conflict_size: int = 3
-    gp_restarts: int = 2
-    cv_folds: int = 5
-    seed: int = 0
+    max_conflict_size: int = _setting(3, ge=1)
+    gp_restarts: int = _setting(2, ge=0)
+    cv_folds: int = _setting(5, ge=2)
+    seed: int = _setting(0, ge=0)
     designs_up_front: bool | str = "auto"
-    replicated_fraction: float = 1.0
+    replicated_fraction: float = _setting(1.0, gt=0, le=1)
 
     def __post_init__(self) -> None:
-        _int("design_points_per_parameter", self.design_points_per_parameter, 1)
-        _int("min_design_points", self.min_design_points, 4)
-        _int("replicates", self.replicates, 2)
-        _int("confirm_replicates", self.confirm_replicates, 1)
-        _int("confirm_extra_replicates", self.confirm_extra_replicates, 0)
-        _int("refine_points", self.refine_points, 0)
-        _int("max_refine_waves", self.max_refine_waves, 0)
-        _int("scan_points", self.scan_points, 64)
-        _int("evidence_samples", self.evidence_samples, 256)
-        _int("max_added_effects", self.max_added_effects, 0)
-        _int("max_conflict_size", self.max_conflict_size, 1)
-        _int("gp_restarts", self.gp_restarts, 0)
-        _int("cv_folds", self.cv_folds, 2)
-        _int("seed", self.seed, 0)
-        for name in ("cutoff", "within_sigma", "tie_log_bayes", "separation_sigma", "strong_log_bayes"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"DiagnosisSettings.{name} must be a positive number, got {v!r}")
+        for f in fields(self):
+            if f.type == "int":
+                _int(f.name, getattr(self, f.name), f.metadata[BOUNDS]["ge"])
+        for f in fields(self):
+            if f.type == "float" and f.metadata[BOUNDS] == {"gt": 0}:
+                v = getattr(self, f.name)
+                if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                    raise ValueError(f"DiagnosisSettings.{f.name} must be a positive number, got {v!r}")
         v = self.replicated_fraction
         if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 1):
             raise ValueError(f"DiagnosisSettings.replicated_fraction must be in (0, 1], got {v!r}")
