@@ -180,7 +180,7 @@ def test_a_poured_batch_killed_mid_pour_continues_from_its_checkpoint(tmp_path, 
     sets = [FRICTION, dict(mu_s_pp=0.3, mu_s_pw=0.3)]
     reference = HollowCylinder.from_config("quick", **kw).run(sets, device="cpu")
     folder = tmp_path / "ck"
-    saves = kill_after_save(monkeypatch, 5)  # two saves per 0.12 s interval (0.05 s chunks): in the third, after two releases
+    saves = kill_after_save(monkeypatch, 5)  # 2 saves per 0.12 s interval: in the 3rd, after 2 releases
     with pytest.raises(Killed):
         HollowCylinder.from_config("quick", **kw).run(sets, device="cpu", checkpoints=BatchCheckpoints(folder, 1e-9))
     assert saves[-1][0] == "advance:pour"
