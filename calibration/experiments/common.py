@@ -603,6 +603,10 @@ class Experiment:
         plan = self.pour_plan(self.bulk_material())
         nw, model = ctx.num_worlds, ctx.model
         fills = [ctx.fill(w) for w in range(nw)]
+        most = max(int(f.batch.max()) + 1 for f in fills)
+        if most > plan.batches:  # e.g. a world's shape parameters made a heavier material
+            raise FillError(f"{self.name}: a poured fill has {most} insertion batches, the schedule "
+                            f"{plan.batches} (from the experiment's material): pour worlds of one material")
         ids = np.concatenate([fill_body_ids(model, w, f.sample) for w, f in enumerate(fills)])
         batch = np.concatenate([f.batch for f in fills])
         drop = np.concatenate([f.batch * f.batch_stride for f in fills])
