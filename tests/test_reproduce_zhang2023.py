@@ -159,6 +159,26 @@ def test_region_statistics_find_the_parameter_behind_the_gap():
     assert "so far (preliminary)" in rp.reproduction_verdict(part).headline
 
 
+def test_linear_effects_show_which_parameter_acts_differently_in_our_dem(tmp_path):
+    """Ours = the paper's + 6 deg x (mu_r_pp scaled to [0, 1]): the fitted effect of mu_r_pp is 6 deg
+    larger in ours, every other effect the same, and the report's section names mu_r_pp."""
+    cfg = cp.load_config(PAPER_CONFIG)
+    pts = rp.paper_points(cfg)
+    j = list(pts.parameter_names).index("mu_r_pp")
+    u = (pts.X[:, j] - cfg.space.lower[j]) / (cfg.space.upper[j] - cfg.space.lower[j])
+    ours = pts.paper_deg + 6.0 * u[:, None]
+    comp = rp.compare_with_paper(pts, ours, cfg.space)
+    for name in ("alpha_static_deg", "beta_dynamic_deg"):
+        le = comp["responses"][name]["linear_effects"]
+        for p in le["parameters"]:
+            want = 6.0 if p == "mu_r_pp" else 0.0
+            assert le["ours"]["effects"][p] - le["paper"]["effects"][p] == pytest.approx(want, abs=1e-9)
+    section = rp._linear_effects_section(comp)
+    assert "mu_r_pp's effect" in section.blocks[-1]
+    few = rp.select_points(pts, 5, cfg.space)
+    assert rp.compare_with_paper(few, few.paper_deg, cfg.space)["responses"]["alpha_static_deg"]["linear_effects"] is None
+
+
 def test_fake_dem_with_the_papers_angles_is_reproduced_end_to_end(tmp_path, monkeypatch, capsys):
     """The whole command with a DEM that returns the paper's EDEM angles: RMSE 0, 'Reproduced',
     surrogate, NSGA-II, confirmation, validation, the paper's optimum and both report files."""
