@@ -146,6 +146,9 @@ def test_truth_and_diagnosis_configs(tmp_path):
     keyed = {c: {k: v for k, v in cfg.items() if k not in ("name", "measurements", "output")} for c, cfg in cfgs.items()}
     assert all(k == keyed["base"] for k in keyed.values())  # the diagnosis cannot tell the cases apart
     assert keyed["base"]["diagnosis"]["max_added_effects"] == 2 and keyed["base"]["candidates"] == list(CANDIDATES)
+    # the lab poured its fills, so the diagnosis pours too where warpdem can; a lab of warpdem's fills does not
+    assert keyed["base"]["experiments"] == {"baffle": {"fill_mode": "poured"}, "cylinder": {"fill_mode": "poured"}}
+    assert "experiments" not in lab_diagnosis_config("base", "quick", tmp_path, fill_mode="identical")
     (tmp_path / "diagnose_rolling_cohesion.yaml").write_text(yaml.safe_dump(cfgs["rolling_cohesion"]))
     cfg, _ = load_diagnosis_config(tmp_path / "diagnose_rolling_cohesion.yaml")
     assert cfg.measurements == "lab_rolling_cohesion.yaml"

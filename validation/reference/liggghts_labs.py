@@ -383,16 +383,28 @@ def truth_document(case: str, records: list[dict[str, Any]], scale: str, fills: 
     }
 
 
-def lab_diagnosis_config(case: str, scale: str, out: Path) -> dict[str, Any]:
+#: experiments whose fills warpdem can pour as LIGGGHTS does (``fill_mode: poured``; the drum keeps
+#: its own settled fill)
+POURED_EXPERIMENTS = ("baffle", "cylinder")
+
+
+def lab_diagnosis_config(case: str, scale: str, out: Path, fill_mode: str = "poured") -> dict[str, Any]:
     """The diagnosis config of one case: :func:`validation.hidden_effects.diagnosis_config` (the base
     model, sliding frictions calibrated; at ``first`` its small ``diagnosis:`` settings, those of
     ``validation/configs/first_diagnosis.yaml``), the three candidates named, and room for two added
-    effects (every case gets the same settings: the diagnosis must not know which case it reads)."""
+    effects (every case gets the same settings: the diagnosis must not know which case it reads).
+    A lab that pours its fills (``fill_mode`` "poured") says so, as a lab's protocol would, and the
+    diagnosis pours its fills too where warpdem can (:data:`POURED_EXPERIMENTS`)."""
     cfg = diagnosis_config(case, scale)
     cfg["name"] = f"liggghts-lab-{case}"
     cfg["output"] = str(out / f"diagnosis_{case}")
     cfg["candidates"] = list(CANDIDATES)
     cfg["diagnosis"] = {**cfg.get("diagnosis", {}), "max_added_effects": 2}
+    if fill_mode == "poured":
+        experiments = dict(cfg.get("experiments") or {})
+        for e in POURED_EXPERIMENTS:
+            experiments[e] = {**experiments.get(e, {}), "fill_mode": "poured"}
+        cfg["experiments"] = experiments
     return cfg
 
 
@@ -451,7 +463,8 @@ def generate_labs(cases: list[str], out: Path, scale: str = "quick", fills: int 
         truth = truth_document(case, records, scale, fills, fill_mode, runs_dir, elapsed, version)
         truth["deck_copies"] = str(deck_copies)
         write_atomic(out / f"truth_{case}.json", json.dumps(truth, indent=1, default=str))
-        write_atomic(out / f"diagnose_{case}.yaml", yaml.safe_dump(lab_diagnosis_config(case, scale, out), sort_keys=False))
+        write_atomic(out / f"diagnose_{case}.yaml", yaml.safe_dump(lab_diagnosis_config(case, scale, out, fill_mode),
+                                                                    sort_keys=False))
         if progress:
             print(f"case {case}: {len(records)} runs, {truth['runs_failed']} failed, {elapsed:.0f} s", flush=True)
     return {"cases": cases, "wall_s": walls, "liggghts_version": version}
