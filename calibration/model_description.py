@@ -11,7 +11,6 @@ with their units and admissible bounds, so a config is checked before any DEM ru
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,10 +23,6 @@ from warpdem.contact import PAIR_TYPES, ParameterSpec
 from .materials import BulkMaterial
 
 __all__ = ["ModelDescription", "contact_law_from_config", "contact_law_to_dict", "load_plugins"]
-
-LAW_KEYS = ("normal", "tangential", "rolling", "cohesion", "track_wear", "clump_damping_mass")
-LAW_KEYS_LISTED_WHEN_SET = ("clump_damping_mass",)
-LAW_DEFAULTS = {f.name: f.default for f in dataclasses.fields(wd.ContactLaw)}
 
 
 def load_plugins(paths: Sequence[str], base_dir: Path | str = ".") -> tuple[str, ...]:
@@ -55,35 +50,19 @@ def load_plugins(paths: Sequence[str], base_dir: Path | str = ".") -> tuple[str,
 
 def contact_law_from_config(raw: Any, where: str = "contact_law") -> wd.ContactLaw:
     """A :class:`warpdem.ContactLaw` from a mapping ``{rolling: epsd2, cohesion: sjkr, ...}``
-    (a ContactLaw is returned as is); unknown keys and models are named in the error.
+    (:meth:`warpdem.ContactLaw.from_config`; a ContactLaw is returned as is, None gives the
+    calibration's default law, rolling ``epsd``); unknown keys and models are named in the error.
     ``clump_damping_mass: contact_point | body`` picks the mass that damps a clump's contacts
     (:class:`warpdem.ContactLaw`; default ``contact_point``)."""
-    if isinstance(raw, wd.ContactLaw):
-        return raw
     if raw is None:
         return wd.ContactLaw(rolling="epsd")
-    if not isinstance(raw, Mapping):
-        raise ConfigError(f"{where}: expected a mapping of sub-model kinds to names {list(LAW_KEYS)}, got {raw!r}")
-    bad = sorted(set(raw) - set(LAW_KEYS))
-    if bad:
-        raise ConfigError(f"{where}: unknown key(s) {bad}; valid: {list(LAW_KEYS)}")
-    try:
-        return wd.ContactLaw(**dict(raw))
-    except ConfigError as exc:
-        raise ConfigError(f"{where}: {exc}") from None
+    return wd.ContactLaw.from_config(raw, where)
 
 
 def contact_law_to_dict(law: wd.ContactLaw) -> dict[str, Any]:
-    """Every sub-model of a law, its parameters (unit, bounds) and references, JSON-able."""
-    # a setting added after records and DEM caches were written is listed only when it is not its
-    # default, so the record of an unchanged law (and every cache key built from it) stays the same
-    out: dict[str, Any] = {k: getattr(law, k) for k in LAW_KEYS
-                           if k not in LAW_KEYS_LISTED_WHEN_SET or getattr(law, k) != LAW_DEFAULTS[k]}
-    out["describe"] = law.describe()
-    out["references"] = law.references()
-    out["parameters"] = {n: {"unit": s.unit, "bounds": list(s.bounds), "default": s.default,
-                             "description": s.description} for n, s in law.specs.items()}
-    return out
+    """Every sub-model of a law, its parameters (unit, bounds) and references, JSON-able
+    (:meth:`warpdem.ContactLaw.to_record`)."""
+    return law.to_record()
 
 
 @dataclass(frozen=True)

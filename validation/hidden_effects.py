@@ -39,7 +39,6 @@ import yaml
 
 from calibration.experiments import make_experiment
 from calibration.materials import BulkMaterial
-from calibration.model_description import contact_law_to_dict
 import warpdem as wd
 from warpdem.config_io import load_config_file, write_atomic
 
@@ -110,7 +109,7 @@ def _run_lab(cases: list[str], conds: dict[str, dict[str, dict[str, Any]]], scal
     loose fills numbered from ``first_fill``. Returns each case's v2 ``experiments`` section, the
     notes on repeats that could not be measured, and one record per launch."""
     numerics = {} if dt is None else {"dt": float(dt), "force_dt": True}
-    law = wd.ContactLaw(**LAB_LAW)
+    law = wd.ContactLaw.from_config(LAB_LAW)
     mat_cfg = lab_material(scale)
     experiments: dict[str, dict[str, Any]] = {c: {} for c in cases}
     notes: dict[str, list[str]] = {}
@@ -166,7 +165,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
     case, drum speed and repeat is a world) and write each case's measurement file, diagnosis
     config and truth. ``dt`` [s]: a fixed time step for every launch (the diagnosis config then
     uses the same), else each batch's recommended step."""
-    law = wd.ContactLaw(**LAB_LAW)
+    law = wd.ContactLaw.from_config(LAB_LAW)
     mat_cfg = lab_material(scale)
     t0 = time.perf_counter()
     experiments, notes, launches = _run_lab(cases, conditions(scale), scale, repeats, device, processes, progress,
@@ -184,7 +183,7 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
             doc["notes"] = "; ".join(notes[case])
         write_atomic(out / f"lab_{case}.yaml", yaml.safe_dump(doc, sort_keys=False))
         truth = {"case": case, "words": CASES[case]["words"], "hidden": CASES[case], "parameters": case_parameters(case),
-                 "lab_model": {"contact_law": contact_law_to_dict(law),
+                 "lab_model": {"contact_law": law.to_record(),
                                "material": "elongated family over the size range, aspect_ratio per case "
                                            "(1 = spheres in 5 equal-number size classes)"},
                  "scale": scale, "repeats": repeats, "dt_s": dt, "notes": notes.get(case, []), "wall_s_all_cases": wall,

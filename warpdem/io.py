@@ -167,8 +167,7 @@ def save_checkpoint(path: str | os.PathLike, sim) -> Path:
     m: Model = sim.model
     law = m.contact_law
     meta = dict(
-        version=2, fingerprint=m.fingerprint, v_ref=sim.solver.v_ref, force=sim.solver.force, law=dict(normal=law.normal, tangential=law.tangential, rolling=law.rolling, cohesion=law.cohesion,
-                            track_wear=law.track_wear, clump_damping_mass=law.clump_damping_mass),
+        version=2, fingerprint=m.fingerprint, v_ref=sim.solver.v_ref, force=sim.solver.force, law=law.to_config(every_key=True),
         materials=[dict(name=x.name, youngs_modulus=x.youngs_modulus, poisson_ratio=x.poisson_ratio, density=x.density)
                    for x in m.materials],
         walls=[dict(name=w.name, material=w.material, world=w.world, tri_offset=w.tri_offset,
@@ -260,7 +259,7 @@ def _model_from_checkpoint(path: Path, data, meta: dict, device: str | None) -> 
         walls.append(Wall(name=w["name"], vertices=data[f"wall{i}/vertices"], faces=data[f"wall{i}/faces"],
                           material=w["material"], world=w["world"], motion=WallMotion(**mo), tri_offset=w["tri_offset"],
                           triangle_labels=labels, label_names=tuple(w["label_names"])))
-    model = Model(host, walls, materials, ContactLaw(**meta["law"]), initial, device=device,
+    model = Model(host, walls, materials, ContactLaw.from_config(meta["law"], f"checkpoint {path}: law"), initial, device=device,
                   max_contacts=meta["max_contacts"], gravity=meta["gravity"])
     saved = meta.get("fingerprint")
     if saved is not None and saved != model.fingerprint:

@@ -233,9 +233,7 @@ def model_fingerprint(host: dict, walls: list[Wall], materials: list[Material], 
         mo = w.motion
         h.update(json.dumps([w.world, w.material, list(mo.velocity), list(mo.angular_velocity), list(mo.origin),
                              mo.start, None if math.isinf(mo.stop) else mo.stop]).encode())
-    law_fields = [law.normal, law.tangential, law.rolling, law.cohesion, law.track_wear]
-    if law.clump_damping_mass != "contact_point":  # listed only when set: earlier fingerprints stay valid
-        law_fields.append(law.clump_damping_mass)
+    law_fields = list(law.to_config().values())  # a later setting listed only when set: earlier fingerprints stay valid
     h.update(json.dumps(dict(law=law_fields,
                              materials=[[m.name, m.youngs_modulus, m.poisson_ratio, m.density] for m in materials],
                              max_contacts=int(max_contacts), gravity=[float(g) for g in gravity])).encode())

@@ -34,7 +34,5 @@ def jsonable(x: Any) -> Any:
     if isinstance(x, wd.Material):
         return dataclasses.asdict(x)
     if isinstance(x, wd.ContactLaw):
-        from ..model_description import contact_law_to_dict
-
-        return jsonable(contact_law_to_dict(x))
+        return jsonable(x.to_record())
     return x

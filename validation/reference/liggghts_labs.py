@@ -103,7 +103,7 @@ TWO_EFFECT_COHESION = 1.0e5
 class LabCase:
     """One hidden model the lab runs.
 
-    law: warpdem sub-models (``wd.ContactLaw`` keywords; the deck writer maps them to LIGGGHTS);
+    law: warpdem sub-models (a ``wd.ContactLaw`` config mapping; the deck writer maps them to LIGGGHTS);
     parameters: the effect's contact parameters (on top of TRUE_FRICTION); hidden_effects: the
     candidate effects it hides (empty: none of them); psd_half_width: None = the stated size
     distribution, else diameters uniform by number over mean * [1 - w, 1 + w] at the stated
@@ -236,7 +236,7 @@ def lab_deck(run: LabRun, scale: str, fill_mode: str = "poured", dt: float | Non
     case = LAB_CASES[run.case]
     preset = _experiment_scale(run.experiment, scale)
     common = {k: v for k, v in run.settings.items() if k != "rpm"}
-    law = wd.ContactLaw(**case.law)
+    law = wd.ContactLaw.from_config(case.law, f"lab case {run.case}: law")
     stated = _stated_material(run.experiment, scale)
     protocol = make_experiment(run.experiment, preset, contact_law=law, material=stated, fill_per_world=True,
                                first_fill_index=run.fill_index, **common)

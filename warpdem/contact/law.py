@@ -2,12 +2,19 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Mapping
 
 from ..errors import ConfigError
 from .base import KINDS, PAIR_TYPES, REGISTRY, ParameterSpec, SubModel
 
 #: Which mass damps a clump's contact (:attr:`ContactLaw.clump_damping_mass`); the first is the default.
 CLUMP_DAMPING_MASSES = ("contact_point", "body")
+
+#: The keys of a law's config mapping (:meth:`ContactLaw.to_config`), in the order every record lists them.
+CONFIG_KEYS = ("normal", "tangential", "rolling", "cohesion", "track_wear", "clump_damping_mass")
+#: Settings added after records, model fingerprints and DEM caches were written: a config lists
+#: them only when they are not their default, so the text of an unchanged law stays the same.
+CONFIG_KEYS_LISTED_WHEN_SET = ("clump_damping_mass",)
 
 
 @dataclass(frozen=True)
@@ -66,8 +73,43 @@ class ContactLaw:
     def __reduce__(self):
         # pickled by names: the receiving process resolves them in its own registry (load the
         # same plugins there first)
-        return (type(self), (self.normal, self.tangential, self.rolling, self.cohesion, self.track_wear,
-                             self.clump_damping_mass))
+        return (type(self), tuple(self.to_config(every_key=True).values()))
+
+    # ------------------------------------------------------------------ config <-> law
+    @classmethod
+    def from_config(cls, raw: Mapping[str, Any], where: str = "contact_law") -> "ContactLaw":
+        """A law from a config mapping ``{rolling: epsd2, cohesion: sjkr, ...}`` (the keys of
+        :data:`CONFIG_KEYS`; those left out keep their defaults); a ContactLaw is returned as is.
+        Unknown keys and sub-models are named in the error, after ``where``."""
+        if isinstance(raw, cls):
+            return raw
+        if not isinstance(raw, Mapping):
+            raise ConfigError(f"{where}: expected a mapping of sub-model kinds to names {list(CONFIG_KEYS)}, got {raw!r}")
+        bad = sorted(set(raw) - set(CONFIG_KEYS))
+        if bad:
+            raise ConfigError(f"{where}: unknown key(s) {bad}; valid: {list(CONFIG_KEYS)}")
+        try:
+            return cls(**dict(raw))
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+
+    def to_config(self, every_key: bool = False) -> dict[str, Any]:
+        """The law as the mapping :meth:`from_config` reads back, keys in :data:`CONFIG_KEYS` order.
+        A setting of :data:`CONFIG_KEYS_LISTED_WHEN_SET` is listed only when it is not its default
+        (records, fingerprints and cache ids of an unchanged law stay the same); ``every_key``
+        lists every key (a checkpoint)."""
+        return {k: getattr(self, k) for k in CONFIG_KEYS
+                if every_key or k not in CONFIG_KEYS_LISTED_WHEN_SET or getattr(self, k) != _DEFAULTS[k]}
+
+    def to_record(self) -> dict[str, Any]:
+        """:meth:`to_config` plus :meth:`describe`, the references and every parameter (unit,
+        bounds, default, description): the JSON-able record of the law in results and reports."""
+        out = self.to_config()
+        out["describe"] = self.describe()
+        out["references"] = self.references()
+        out["parameters"] = {n: {"unit": s.unit, "bounds": list(s.bounds), "default": s.default,
+                                 "description": s.description} for n, s in self.specs.items()}
+        return out
 
     @property
     def specs(self) -> dict[str, ParameterSpec]:
@@ -133,3 +175,6 @@ class ContactLaw:
 
     def references(self) -> dict[str, str]:
         return {k: f"{s.name}: {s.reference}" for k, s in self.submodels.items()}
+
+
+_DEFAULTS = {k: ContactLaw.__dataclass_fields__[k].default for k in CONFIG_KEYS}
