@@ -13,10 +13,10 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from warpdem.io import write_pvd  # the .pvd collections: the engine's writer
 from warpdem.json_io import write_json as save_json  # results.json, strict and whole
 
 from .erosion import depth_rate_mm_per_year
@@ -26,16 +26,6 @@ from .regions import REGIONS as WEAR_REGIONS
 
 COMP_COLOURS = {"shroud": "tab:green", "blade": "tab:orange", "hub": "tab:blue", "volute": "tab:red",
                 "tongue": "tab:purple", "inlet": "tab:gray", "outlet": "tab:brown"}
-
-
-def _pvd(path: Path, entries: list[tuple[float, str]]) -> None:
-    lines = ['<?xml version="1.0"?>', '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
-             "  <Collection>"]
-    lines += [f'    <DataSet timestep="{t:.9g}" group="" part="0" file={quoteattr(f)}/>' for t, f in entries]
-    lines += ["  </Collection>", "</VTKFile>"]
-    from warpdem.config_io import write_atomic
-
-    write_atomic(path, "\n".join(lines) + "\n")
 
 
 def wall_cell_data(case, wall: int, world: int | None = None) -> dict[str, np.ndarray]:
@@ -154,7 +144,7 @@ class VTKWriter:
     def close(self) -> None:
         for key, entries in self.frames.items():
             if entries:
-                _pvd(self.dir / f"{key}.pvd", entries)
+                write_pvd(self.dir / f"{key}.pvd", entries)
 
 
 def write_wear_surfaces(case, out: Path) -> list[Path]:
