@@ -258,11 +258,7 @@ def variant_law(law: wd.ContactLaw, changes: Mapping[str, Any]) -> wd.ContactLaw
     """``law`` with some sub-models or options replaced (names as in :class:`warpdem.ContactLaw`)."""
     if not changes:
         return law
-    keys = ("normal", "tangential", "rolling", "cohesion", "track_wear", "clump_damping_mass")
-    bad = sorted(set(changes) - set(keys))
-    if bad:
-        raise ConfigError(f"variant contact_law: unknown key(s) {bad}; valid: {list(keys)}")
-    return wd.ContactLaw(**{**{k: getattr(law, k) for k in keys}, **changes})
+    return wd.ContactLaw.from_config({**law.to_config(every_key=True), **changes}, "variant contact_law")
 
 
 def applies(variant: str, experiment: str) -> bool:
