@@ -39,7 +39,7 @@ import time
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 import warp as wp
@@ -61,6 +61,10 @@ from .experiments.common import _jsonable, cpu_processes
 from .measurement.errors import MeasurementError
 from .measurement.records import load_measurements
 from .model_description import ModelDescription
+
+if TYPE_CHECKING:
+    from .optimisation import CalibrationResult, NSGA2Settings
+    from .surrogates import CVSurrogate
 
 FILL_MODES = ("independent", "shared")
 # first loose-fill index of each kind of DEM run when fills are independent: design sample i uses
@@ -733,29 +737,61 @@ class Campaign:
 
     # ------------------------------------------------------------------ analysis
     def run(self, progress: bool = True) -> dict[str, Any]:
-        from .optimisation import NSGA2Settings, calibrate, plot_acceptable_set
-        from .reports_surrogate import plot_predicted_vs_simulated
-        from .sensitivity import plot_sensitivity, sobol_indices
-        from .surrogates import cross_validated_surrogate, r2_score, relative_errors, rmse
+        """The whole campaign, resumably: targets, the design's DEM runs, the surrogate, NSGA-II,
+        confirmation (with sequential refinement), sensitivity and validation; writes
+        ``results.json``, ``summary.md`` and ``report.html`` and returns what ``results.json`` holds."""
+        # the analysis' modules load before any DEM runs (a broken install fails first)
+        from . import optimisation, reports_surrogate, sensitivity, surrogates  # noqa: F401
 
+        t_start = time.perf_counter()
+        res = self._results_header()
+        self.check_records()  # records of another setup or design: refused before any DEM runs
+        self._resolve_targets(res)
+        done = self._run_design_timed(res, progress)
+        Xtr, Ytr, Xte, Yte = self._training_data(res, done)
+        sur = self._design_surrogate(res, Xtr, Ytr, Xte, Yte)
+        cal, settings = self._first_optimisation(res, sur, Xtr)
+        rounds, sur, cal = self._confirm_and_refine(res, sur, cal, settings, Xtr, Ytr)
+        self._plot_acceptable_set(cal)
+        self._sensitivity(res, sur)
+        self._validate(res, rounds[-1]["parameters"])
+        self._record_vtk_series(res)
+        self._record_wall_times(res, t_start)
+        self._write_results(res)
+        return res
+
+    def _results_header(self) -> dict[str, Any]:
+        """The start of ``results.json``: campaign name, parameter names, fixed parameters, model,
+        contact law and device."""
         cfg = self.cfg
         pnames = [p.name for p in cfg.space.parameters]
-        t_start = time.perf_counter()
-        res: dict[str, Any] = dict(name=cfg.name, parameters=pnames, fixed=cfg.fixed,
-                                   model=cfg.model.describe(), contact_law=cfg.model.contact_law.describe(),
-                                   device=str(cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")))
-        self.check_records()  # records of another setup or design: refused before any DEM runs
+        return dict(name=cfg.name, parameters=pnames, fixed=cfg.fixed, model=cfg.model.describe(),
+                    contact_law=cfg.model.contact_law.describe(),
+                    device=str(cfg.device or ("cuda" if wp.is_cuda_available() else "cpu")))
 
-        def run_target(resp_: Response, sets: list[dict[str, float]], first_fill: int,
-                       record: Mapping[int, Path] | None) -> list[dict[str, Any]]:
-            return self.run_group("target", resp_, sets, first_fill, record)
+    def _all_responses(self) -> list[Response]:
+        """The calibrated responses, then the validation (if any)."""
+        return self.cfg.responses + ([self.cfg.validation] if self.cfg.validation else [])
 
-        for resp in cfg.responses + ([cfg.validation] if cfg.validation else []):
+    def _run_target(self, resp: Response, sets: list[dict[str, float]], first_fill: int,
+                    record: Mapping[int, Path] | None) -> list[dict[str, Any]]:
+        """A DEM target's runs (:meth:`run_group` of kind "target"), for :func:`resolve_target`."""
+        return self.run_group("target", resp, sets, first_fill, record)
+
+    def _resolve_targets(self, res: dict[str, Any]) -> None:
+        """Every response's target [deg] (from its file or DEM at known parameters), logged and
+        recorded in ``res["targets"]``."""
+        cfg = self.cfg
+        for resp in self._all_responses():
             resolve_target(resp, cfg, self.log, vtk_folder=self.vtk_folder("target", resp.name)
-                           if cfg.vtk is not None and cfg.vtk.targets else None, run=run_target)
+                           if cfg.vtk is not None and cfg.vtk.targets else None, run=self._run_target)
             self.log(f"target {resp.name} = {resp.target_deg:.3f} deg ({resp.target_source})")
         res["targets"] = {r.name: dict(deg=r.target_deg, std_deg=r.target_std_deg, source=r.target_source)
-                          for r in cfg.responses + ([cfg.validation] if cfg.validation else [])}
+                          for r in self._all_responses()}
+
+    def _run_design_timed(self, res: dict[str, Any], progress: bool) -> dict[tuple[int, str], dict]:
+        """:meth:`run_design`, with its wall time in this sitting [s] and the design's DEM time over
+        every sitting [s] recorded in ``res``; returns the newest record of every (sample, response)."""
         t0 = time.perf_counter()
         done = self.run_design(progress)
         res["campaign_wall_s"] = round(time.perf_counter() - t0, 1)  # the design's part of this sitting
@@ -763,6 +799,14 @@ class Campaign:
         # failed runs that were retried included
         res["design_dem_wall_s_all_sessions"] = round(
             sum(float(r.get("dem_wall_share_s") or 0.0) for r in self._sample_records), 1)
+        return done
+
+    def _training_data(self, res: dict[str, Any], done: Mapping[tuple[int, str], dict]
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The design's points and angles [deg] (recorded in ``res["design"]`` with the failed
+        runs), split into training and held-out rows of the successful samples: ``(Xtr, Ytr, Xte,
+        Yte)``. Refuses (RuntimeError) too few successful training samples for a surrogate."""
+        cfg = self.cfg
         X = self.design()
         rnames = [r.name for r in cfg.responses]
         Y = np.array([[done[(i, n)]["angle_deg"] if done[(i, n)]["status"] == "ok" else np.nan for n in rnames]
@@ -773,52 +817,76 @@ class Campaign:
                              kind=self.design_kind)
         ok = np.all(np.isfinite(Y), axis=1)
         tr = ~self.held_out_mask(len(X))
-        if ok[tr].sum() <= len(pnames) + 1:
+        if ok[tr].sum() <= len(cfg.space.parameters) + 1:
             raise RuntimeError(f"only {ok[tr].sum()} successful training samples; see {self.samples_path}")
-        Xtr, Ytr = X[tr & ok], Y[tr & ok]
-        Xte, Yte = X[~tr & ok], Y[~tr & ok]
+        return X[tr & ok], Y[tr & ok], X[~tr & ok], Y[~tr & ok]
+
+    def _fit_surrogate(self, Xtr: np.ndarray, Ytr: np.ndarray) -> CVSurrogate:
+        """The cross-validated surrogate of the training points ``Xtr`` and angles ``Ytr`` [deg]."""
+        cfg = self.cfg
+        from .surrogates import cross_validated_surrogate
+
+        return cross_validated_surrogate(Xtr, Ytr, space=cfg.space, response_names=[r.name for r in cfg.responses],
+                                         seed=cfg.seed,
+                                         n_splits=int(cfg.surrogate.get("n_splits", min(5, len(Xtr) // 2))),
+                                         n_repeats=int(cfg.surrogate.get("n_repeats", 2)))
+
+    def _design_surrogate(self, res: dict[str, Any], Xtr: np.ndarray, Ytr: np.ndarray, Xte: np.ndarray,
+                          Yte: np.ndarray) -> CVSurrogate:
+        """The surrogate of the design's training samples, recorded in ``res["surrogate"]`` with its
+        error on the held-out samples (R^2, RMSE [deg], relative errors; plotted) where there are any."""
+        from .reports_surrogate import plot_predicted_vs_simulated
+        from .surrogates import r2_score, relative_errors, rmse
+
         self.log(f"surrogate: cross-validated choice on {len(Xtr)} training samples")
-        sur = cross_validated_surrogate(Xtr, Ytr, space=cfg.space, response_names=rnames, seed=cfg.seed,
-                                        n_splits=int(cfg.surrogate.get("n_splits", min(5, len(Xtr) // 2))),
-                                        n_repeats=int(cfg.surrogate.get("n_repeats", 2)))
+        sur = self._fit_surrogate(Xtr, Ytr)
         res["surrogate"] = sur.summary()
         if len(Xte):
             P = sur.predict(Xte)
             res["surrogate"]["held_out"] = dict(n=len(Xte), r2=r2_score(Yte, P), rmse_deg=rmse(Yte, P),
                                                 relative_errors=relative_errors(Yte, P))
-            plot_predicted_vs_simulated(Yte, P, rnames, path=str(self.out / "surrogate_held_out.png"))
-        opt = {k: v for k, v in cfg.optimisation.items() if k in ("pop_size", "n_generations", "seed")}
+            plot_predicted_vs_simulated(Yte, P, [r.name for r in self.cfg.responses],
+                                        path=str(self.out / "surrogate_held_out.png"))
+        return sur
+
+    def _calibrate(self, sur: CVSurrogate, Xtr: np.ndarray, settings: NSGA2Settings) -> CalibrationResult:
+        """NSGA-II on the surrogate ``sur`` towards the targets [deg] (within ``tolerance_deg``),
+        its acceptable set supported by the training points ``Xtr``."""
+        from .optimisation import calibrate
+
+        cfg = self.cfg
+        return calibrate(sur, [r.target_deg for r in cfg.responses], cfg.space,
+                         tolerance=cfg.optimisation.get("tolerance_deg"), settings=settings,
+                         response_names=[r.name for r in cfg.responses],
+                         n_dense=int(cfg.optimisation.get("n_dense", 50_000)), support_X=Xtr)
+
+    def _first_optimisation(self, res: dict[str, Any], sur: CVSurrogate, Xtr: np.ndarray
+                            ) -> tuple[CalibrationResult, NSGA2Settings]:
+        """The NSGA-II settings of the config and the first optimisation on the design's
+        surrogate, recorded in ``res["optimisation"]``."""
+        from .optimisation import NSGA2Settings
+
+        opt = {k: v for k, v in self.cfg.optimisation.items() if k in ("pop_size", "n_generations", "seed")}
         settings = NSGA2Settings(**opt)
-        tol = cfg.optimisation.get("tolerance_deg")
-        targets = [r.target_deg for r in cfg.responses]
         self.log(f"NSGA-II: population {settings.pop_size}, {settings.n_generations} generations")
-        cal = calibrate(sur, targets, cfg.space, tolerance=tol, settings=settings, response_names=rnames,
-                        n_dense=int(cfg.optimisation.get("n_dense", 50_000)), support_X=Xtr)
+        cal = self._calibrate(sur, Xtr, settings)
         res["optimisation"] = cal.to_dict()
-        # confirmation: DEM at the compromise (Table 9). If it misses a target by more than the
-        # tolerance, the confirmed point joins the training set and the surrogate and NSGA-II
-        # are redone (sequential refinement), at most ``refine_rounds`` times.
+        return cal, settings
+
+    def _confirm_and_refine(self, res: dict[str, Any], sur: CVSurrogate, cal: CalibrationResult,
+                            settings: NSGA2Settings, Xtr: np.ndarray, Ytr: np.ndarray
+                            ) -> tuple[list[dict[str, Any]], CVSurrogate, CalibrationResult]:
+        """Confirmation: DEM at the compromise (Table 9). If it misses a target by more than the
+        tolerance [deg], the confirmed point joins the training set and the surrogate and NSGA-II
+        are redone (sequential refinement), at most ``refine_rounds`` times. Records every round in
+        ``res["confirmation"]``; returns the rounds and the last surrogate and optimisation."""
+        pnames = [p.name for p in self.cfg.space.parameters]
+        rnames = [r.name for r in self.cfg.responses]
         tol_deg = np.broadcast_to(np.asarray(cal.tolerance, dtype=float), (len(rnames),))
         rounds = []
         for rnd in range(self.refine_rounds + 1):
             x_best = dict(zip(pnames, map(float, cal.compromise_x)))
-            conf = {}
-            for resp in cfg.responses:
-                recs = self.run_group("confirmation", resp, [x_best] * cfg.confirmation_runs,
-                                      first_fill=CONFIRMATION_FILLS + 10_000 * rnd,
-                                      record={0: self.vtk_folder(f"confirmation_round{rnd}", resp.name)}
-                                      if cfg.vtk is not None and cfg.vtk.confirmation else None, round_=rnd)
-                angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
-                dem = float(np.mean(angles)) if angles else None
-                conf[resp.name] = dict(
-                    dem_deg=dem, dem_fills=angles,
-                    dem_std_deg=float(np.std(angles, ddof=1)) if len(angles) > 1 else None,
-                    target_deg=resp.target_deg, target_std_deg=resp.target_std_deg,
-                    surrogate_deg=float(sur.predict(cal.compromise_x[None])[0][rnames.index(resp.name)]),
-                    relative_error_pct=None if dem is None else abs(dem - resp.target_deg) / resp.target_deg * 100,
-                    abs_error_deg=None if dem is None else abs(dem - resp.target_deg),
-                    failed=[r["error"] for r in recs if r["status"] != "ok"])
-                self.log(f"confirmation {resp.name} (round {rnd}): DEM {dem} deg vs target {resp.target_deg:.3f} deg")
+            conf = {resp.name: self._confirmation(resp, rnd, x_best, sur, cal) for resp in self.cfg.responses}
             rounds.append(dict(parameters=x_best, responses=conf))
             errs = [c["abs_error_deg"] for c in conf.values()]
             if any(e is None for e in errs) or all(e <= t for e, t in zip(errs, tol_deg)) or rnd == self.refine_rounds:
@@ -826,35 +894,82 @@ class Campaign:
             Xtr = np.vstack([Xtr, cal.compromise_x[None]])
             Ytr = np.vstack([Ytr, [[conf[n]["dem_deg"] for n in rnames]]])
             self.log(f"refinement round {rnd + 1}: surrogate refitted with {len(Xtr)} samples")
-            sur = cross_validated_surrogate(Xtr, Ytr, space=cfg.space, response_names=rnames, seed=cfg.seed,
-                                            n_splits=int(cfg.surrogate.get("n_splits", min(5, len(Xtr) // 2))),
-                                            n_repeats=int(cfg.surrogate.get("n_repeats", 2)))
-            cal = calibrate(sur, targets, cfg.space, tolerance=tol, settings=settings, response_names=rnames,
-                            n_dense=int(cfg.optimisation.get("n_dense", 50_000)), support_X=Xtr)
+            sur = self._fit_surrogate(Xtr, Ytr)
+            cal = self._calibrate(sur, Xtr, settings)
             res["optimisation"] = cal.to_dict()
         res["confirmation"] = dict(rounds[-1], rounds=rounds)
+        return rounds, sur, cal
+
+    def _confirmation(self, resp: Response, rnd: int, x_best: dict[str, float], sur: CVSurrogate,
+                      cal: CalibrationResult) -> dict[str, Any]:
+        """Confirmation round ``rnd`` of ``resp``: DEM at the compromise ``x_best``, its mean angle
+        [deg] over the fills against the target and the surrogate's prediction (errors in % and deg)."""
+        cfg = self.cfg
+        rnames = [r.name for r in cfg.responses]
+        recs = self.run_group("confirmation", resp, [x_best] * cfg.confirmation_runs,
+                              first_fill=CONFIRMATION_FILLS + 10_000 * rnd,
+                              record={0: self.vtk_folder(f"confirmation_round{rnd}", resp.name)}
+                              if cfg.vtk is not None and cfg.vtk.confirmation else None, round_=rnd)
+        angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
+        dem = float(np.mean(angles)) if angles else None
+        conf = dict(
+            dem_deg=dem, dem_fills=angles,
+            dem_std_deg=float(np.std(angles, ddof=1)) if len(angles) > 1 else None,
+            target_deg=resp.target_deg, target_std_deg=resp.target_std_deg,
+            surrogate_deg=float(sur.predict(cal.compromise_x[None])[0][rnames.index(resp.name)]),
+            relative_error_pct=None if dem is None else abs(dem - resp.target_deg) / resp.target_deg * 100,
+            abs_error_deg=None if dem is None else abs(dem - resp.target_deg),
+            failed=[r["error"] for r in recs if r["status"] != "ok"])
+        self.log(f"confirmation {resp.name} (round {rnd}): DEM {dem} deg vs target {resp.target_deg:.3f} deg")
+        return conf
+
+    def _plot_acceptable_set(self, cal: CalibrationResult) -> None:
+        """``acceptable_set.png`` of the last optimisation."""
+        from .optimisation import plot_acceptable_set
+
         plot_acceptable_set(cal, path=str(self.out / "acceptable_set.png"))
-        sob = sobol_indices(sur, cfg.space, n=cfg.sobol_n, response_names=rnames)
+
+    def _sensitivity(self, res: dict[str, Any], sur: CVSurrogate) -> None:
+        """Sobol indices of the surrogate ``sur`` (``res["sensitivity"]``, ``sensitivity.png``)."""
+        from .sensitivity import plot_sensitivity, sobol_indices
+
+        cfg = self.cfg
+        sob = sobol_indices(sur, cfg.space, n=cfg.sobol_n, response_names=[r.name for r in cfg.responses])
         res["sensitivity"] = dict(first_order=sob.first_order, total_order=sob.total_order,
                                   percent_total=sob.percent_contribution("total"), n=sob.n,
                                   parameters=sob.parameter_names, responses=sob.response_names)
         plot_sensitivity(sob, path=str(self.out / "sensitivity.png"))
-        if cfg.validation is not None:
-            v = cfg.validation
-            recs = self.run_group("validation", v, [rounds[-1]["parameters"]], first_fill=VALIDATION_FILLS,
-                                  record={0: self.vtk_folder("validation", v.name)}
-                                  if cfg.vtk is not None and cfg.vtk.validation else None)
-            angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
-            dem = float(np.mean(angles)) if angles else None
-            res["validation"] = dict(experiment=v.experiment, scale=v.scale, dem_deg=dem, measured_deg=v.target_deg,
-                                     measured_std_deg=v.target_std_deg,
-                                     relative_error_pct=None if dem is None else abs(dem - v.target_deg) / v.target_deg * 100,
-                                     failed=[r["error"] for r in recs if r["status"] != "ok"])
-            self.log(f"validation {v.name}: DEM {dem} deg vs measured {v.target_deg:.3f} deg")
-        if cfg.vtk is not None:  # every series written by this campaign (any session), relative to output
+
+    def _validate(self, res: dict[str, Any], parameters: dict[str, float]) -> None:
+        """DEM of the validation experiment (if any) at the confirmed ``parameters``: its mean angle
+        [deg] against the measured one and the relative error [%] (``res["validation"]``)."""
+        cfg = self.cfg
+        if cfg.validation is None:
+            return
+        v = cfg.validation
+        recs = self.run_group("validation", v, [parameters], first_fill=VALIDATION_FILLS,
+                              record={0: self.vtk_folder("validation", v.name)}
+                              if cfg.vtk is not None and cfg.vtk.validation else None)
+        angles = [a for r in recs if r["status"] == "ok" for a in r["replicate_angles_deg"]]
+        dem = float(np.mean(angles)) if angles else None
+        res["validation"] = dict(experiment=v.experiment, scale=v.scale, dem_deg=dem, measured_deg=v.target_deg,
+                                 measured_std_deg=v.target_std_deg,
+                                 relative_error_pct=None if dem is None else abs(dem - v.target_deg) / v.target_deg * 100,
+                                 failed=[r["error"] for r in recs if r["status"] != "ok"])
+        self.log(f"validation {v.name}: DEM {dem} deg vs measured {v.target_deg:.3f} deg")
+
+    def _record_vtk_series(self, res: dict[str, Any]) -> None:
+        """Every VTK series written by this campaign (any sitting), relative to the output folder
+        (``res["vtk_series"]``; only with a ``vtk`` section)."""
+        cfg = self.cfg
+        if cfg.vtk is not None:
             root = self.out / cfg.vtk.folder
             res["vtk_series"] = sorted(str(p.parent.relative_to(self.out)) if p.is_relative_to(self.out) else str(p.parent)
                                        for p in root.glob("*/*/particles.pvd"))
+
+    def _record_wall_times(self, res: dict[str, Any], t_start: float) -> None:
+        """DEM wall time over every sitting, this sitting's :meth:`run` since ``t_start``
+        (:func:`time.perf_counter`), and the sittings' wall times [s]; marks this sitting finished."""
         res["dem_wall_s_all_sittings"] = round(res["design_dem_wall_s_all_sessions"] + sum(
             float(r.get("dem_wall_share_s") or 0.0) for rec in self._run_records for r in rec.get("results", [])), 1)
         res["analysis_wall_s"] = round(time.perf_counter() - t_start, 1)  # this sitting's run(), targets included
@@ -862,13 +977,15 @@ class Campaign:
         res["wall_s_this_sitting"] = sittings[-1]["wall_s"]
         res["wall_s"] = round(sum(float(x["wall_s"]) for x in sittings), 1)  # over every sitting [s]
         res["sittings"] = len(sittings)
+
+    def _write_results(self, res: dict[str, Any]) -> None:
+        """``results.json``, ``summary.md`` and ``report.html`` into the output folder."""
         write_atomic(self.out / "results.json", json.dumps(_jsonable(res), indent=1))
         write_atomic(self.out / "summary.md", summary_markdown(res))
         from .report_campaign import write_campaign_report
 
         write_campaign_report(_jsonable(res), self.out)  # report.html: verdict, warnings, figures
         self.log(f"done in {res['wall_s']} s: {self.out / 'summary.md'}")
-        return res
 
 
 def _material_label(res: Mapping[str, Any]) -> str:

@@ -28,7 +28,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 import trimesh
@@ -45,6 +45,9 @@ from ..materials import BulkMaterial, sample_particles
 from .checkpoints import BatchCheckpoint, BatchCheckpoints, clear_checkpoints, decode_value
 from .results_json import jsonable as _jsonable
 from .run_context import RunContext
+
+if TYPE_CHECKING:
+    from warpdem.timestep import TimeStepLimits
 
 __all__ = ["BatchCheckpoints", "Experiment", "ExperimentResult", "RunContext", "clear_checkpoints",
            "normalize_parameter_sets", "rectangle", "fit_to_dict"]
@@ -755,147 +758,288 @@ class Experiment:
 
     def _run(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any], device: str | None,
              progress: bool, checkpoints: BatchCheckpoints | None = None) -> list[ExperimentResult]:
-        """:meth:`run` in this process."""
+        """:meth:`run` in this process: the batch's worlds and fills, its checkpoint, the protocol
+        (run again with more slots after a contact overflow), one result per world."""
         wall0 = time.perf_counter()
+        batch = self._batch_setup(parameter_sets, device)
+        checkpoint, saved = self._open_checkpoint(batch, checkpoints)
+        run = self._simulate_batch(batch, device, progress, checkpoint, saved, wall0)
+        timing = self._batch_timing(batch, run, checkpoint, wall0)
+        protocol = self._protocol_record(batch)
+        results = [self._world_result(batch, run, w, timing, protocol) for w in range(batch.num_worlds)]
+        run.ctx.log("done: " + ", ".join(f"w{r.world}={r.angle_deg:.2f}" if r.ok else f"w{r.world}=failed"
+                                         for r in results))
+        return results
+
+    def _batch_setup(self, parameter_sets: Sequence[Mapping[str, float]] | Mapping[str, Any],
+                     device: str | None) -> _BatchSetup:
+        """The batch before its model is built: parameter sets split into contact and shape
+        parameters, each world's material, the fills (checked against the walls' height), the
+        motion start [s] and the slots per sphere to start with."""
         law = self.contact_law
         material = self.bulk_material()
         shape_names = list(self.shape_parameter_names())
         sets = normalize_parameter_sets(parameter_sets, [*law.parameter_names, *shape_names])
         defaults = normalize_parameter_sets([self.contact_defaults], law.parameter_names)[0]
-        nw = len(sets)
         # shape parameters make a material per world; contact parameters go to the builder
         shapes = [{k: s.pop(k) for k in shape_names if k in s} for s in sets]
         materials = [material.with_shape_parameters(**sh) if sh else material for sh in shapes]
+        fills = self._batch_fills(material, materials, device)
+        self.check_fill_tops(fills, material)
+        t_motion = self.motion_start(material)
+        return _BatchSetup(law=law, material=material, sets=sets, defaults=defaults, shapes=shapes,
+                           materials=materials, fills=fills, t_motion=t_motion,
+                           max_contacts=max(int(self.max_contacts), _contact_slots(materials)),
+                           max_neighbours=self.max_neighbours)
+
+    def _batch_fills(self, material: BulkMaterial, materials: list[BulkMaterial],
+                     device: str | None) -> list[FillResult]:
+        """The batch's fills: one per world (``fill_per_world``, or worlds of different
+        materials), else one that every world shares."""
         per_world = self.fill_per_world or len(set(map(_material_key, materials))) > 1
         if per_world:
             # a world's own fill: index first_fill_index + w (fill_per_world), else the shared seed
-            fills = [self.make_fill(materials[w], np.random.default_rng(
+            return [self.make_fill(materials[w], np.random.default_rng(
                 [self.seed, self.first_fill_index + w] if self.fill_per_world else self.seed), device)
-                for w in range(nw)]
-        else:
-            fills = [self.make_fill(material, np.random.default_rng(self.seed), device)]
-        self.check_fill_tops(fills, material)
-        t_motion = self.motion_start(material)
-        max_contacts, max_neighbours = max(int(self.max_contacts), _contact_slots(materials)), self.max_neighbours
-        retries: list[dict[str, Any]] = []
-        checkpoint = saved = None
-        if checkpoints is not None and self.vtk_every is None:
-            checkpoint = BatchCheckpoint(checkpoints, self, {
-                "parameter_sets": [{**a, **b} for a, b in zip(sets, shapes)], "contact_defaults": defaults,
-                **self.checkpoint_identity()})
-            saved = checkpoint.read()
-            if saved is not None:  # the slot capacities the saved run had grown to
-                max_contacts = int(saved["capacities"]["max_contacts"])
-                max_neighbours = saved["capacities"]["max_neighbours"]
-                retries = list(saved.get("retries") or [])
+                for w in range(len(materials))]
+        return [self.make_fill(material, np.random.default_rng(self.seed), device)]
+
+    def _open_checkpoint(self, batch: _BatchSetup, checkpoints: BatchCheckpoints | None
+                         ) -> tuple[BatchCheckpoint | None, dict[str, Any] | None]:
+        """The batch's checkpoint (None without ``checkpoints`` or with ``vtk_every``) and what it
+        saved (None if nothing); a saved run's slot capacities and retries go into ``batch``."""
+        if checkpoints is None or self.vtk_every is not None:
+            return None, None
+        checkpoint = BatchCheckpoint(checkpoints, self, {
+            "parameter_sets": [{**a, **b} for a, b in zip(batch.sets, batch.shapes)],
+            "contact_defaults": batch.defaults, **self.checkpoint_identity()})
+        saved = checkpoint.read()
+        if saved is not None:  # the slot capacities the saved run had grown to
+            batch.max_contacts = int(saved["capacities"]["max_contacts"])
+            batch.max_neighbours = saved["capacities"]["max_neighbours"]
+            batch.retries = list(saved.get("retries") or [])
+        return checkpoint, saved
+
+    def _simulate_batch(self, batch: _BatchSetup, device: str | None, progress: bool,
+                        checkpoint: BatchCheckpoint | None, saved: dict[str, Any] | None,
+                        wall0: float) -> _BatchRun:
+        """Build the model, continue the saved run if any, and run the protocol; after a contact
+        slot overflow, again from the same fill with more slots (at most ``overflow_retries``
+        times). ``wall0``: :func:`time.perf_counter` at the start of the run [s]."""
         while True:
-            model, sim, dt, limits = self._build_model(law, material, fills, sets, defaults, t_motion, device,
-                                                       max_contacts, max_neighbours, materials)
-            resume = None
-            if saved is not None:
-                loaded = checkpoint.load(saved, model, device, sim.solver.max_neighbours)
-                if loaded is not None:
-                    sim, resume = loaded, saved["protocol"]
-                    checkpoint.resumed = {"step": int(sim.steps), "time_s": round(sim.time, 9),
-                                          "protocol_step": len(resume["done"]),
-                                          "in_step": decode_value(resume["inner"])["label"] if resume.get("inner")
-                                          else None}
-                    checkpoint.note(f"{checkpoint.slot}: continuing from step {sim.steps} (t = {sim.time:.3f} s, "
-                                    f"{len(resume['done'])} protocol step(s) done)")
-                saved = None
+            model, sim, dt, limits = self._build_model(batch.law, batch.material, batch.fills, batch.sets,
+                                                       batch.defaults, batch.t_motion, device, batch.max_contacts,
+                                                       batch.max_neighbours, batch.materials)
+            sim, resume = self._resume_saved(checkpoint, saved, model, device, sim)
+            saved = None
             steps_before = int(sim.steps)
             # an unstable world is frozen and failed alone; the others of the batch run on
             sim.on_unstable = "freeze"
-            ctx = RunContext(self, sim, fills, progress, checkpoint=checkpoint, resume=resume,
-                             capacities={"max_contacts": max_contacts, "max_neighbours": max_neighbours},
-                             retries=retries)
-            ctx.log(f"{nw} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, dt={dt:.3g} s "
-                    f"(limit {limits.limit:.3g} s)")
-            if not retries:
+            ctx = self._run_context(batch, model, sim, dt, limits, progress, checkpoint, resume)
+            if not batch.retries:
                 build_s = time.perf_counter() - wall0
             sim0 = time.perf_counter()
-            outcome: list[dict[str, Any]] = [dict() for _ in range(nw)]
-            fatal = None
-            try:
-                outcome = self.protocol(ctx, t_motion)
-                if ctx._resume is not None and ctx._n_steps < len(ctx._done):
-                    raise RuntimeError(f"{self.name}: the protocol ran {ctx._n_steps} steps, its checkpoint "
-                                       f"recorded {len(ctx._done)}")
-                if ctx._resume is None:  # the end (unless a finished checkpoint was loaded as it is)
-                    ctx.save_checkpoint(None)
-            except ContactOverflowError as exc:
-                fatal = f"{type(exc).__name__}: {exc}"
-                if len(retries) < int(self.overflow_retries):
-                    # slots are sized before the run; a denser packing than expected is not an
-                    # error of the user's: run again from the same fill with room to spare
-                    if exc.kind == "neighbours":
-                        old = sim.solver.max_neighbours
-                        max_neighbours = max(int(math.ceil(1.25 * (exc.needed or 0))), int(math.ceil(1.5 * old)))
-                        new = max_neighbours
-                    else:
-                        old = max_contacts
-                        max_contacts = new = int(math.ceil(1.5 * max_contacts))
-                    retries.append(dict(kind=exc.kind, capacity=old, needed=exc.needed, rerun_with=new,
-                                        wasted_s=round(time.perf_counter() - sim0, 3)))
-                    ctx.log(f"{exc.kind} slots overflowed ({exc}); running again with {new} slots per sphere")
-                    continue
-            except StabilityError as exc:
-                fatal = f"{type(exc).__name__}: {exc}"
-            break
+            outcome, fatal, again = self._run_protocol(batch, ctx, sim, sim0)
+            if not again:
+                break
         sim_s = time.perf_counter() - sim0
-        unstable = sim.failed_worlds()
-        timing = {"wall_s": round(time.perf_counter() - wall0, 3), "build_s": round(build_s, 3),
-                  "simulate_s": round(sim_s, 3), "steps": int(sim.steps),
-                  "steps_this_run": int(sim.steps) - steps_before, "dt_s": dt,
+        return _BatchRun(model=model, sim=sim, dt=dt, limits=limits, ctx=ctx, outcome=outcome, fatal=fatal,
+                         steps_before=steps_before, build_s=build_s, simulate_s=sim_s, unstable=sim.failed_worlds())
+
+    def _resume_saved(self, checkpoint: BatchCheckpoint | None, saved: dict[str, Any] | None, model: wd.Model,
+                      device: str | None, sim: wd.Simulation) -> tuple[wd.Simulation, dict[str, Any] | None]:
+        """The simulation to run (the saved one, loaded into ``model``, where it matches) and the
+        saved protocol state to resume (None: start the protocol from the beginning)."""
+        if saved is None:
+            return sim, None
+        loaded = checkpoint.load(saved, model, device, sim.solver.max_neighbours)
+        if loaded is None:
+            return sim, None
+        sim, resume = loaded, saved["protocol"]
+        checkpoint.resumed = {"step": int(sim.steps), "time_s": round(sim.time, 9),
+                              "protocol_step": len(resume["done"]),
+                              "in_step": decode_value(resume["inner"])["label"] if resume.get("inner") else None}
+        checkpoint.note(f"{checkpoint.slot}: continuing from step {sim.steps} (t = {sim.time:.3f} s, "
+                        f"{len(resume['done'])} protocol step(s) done)")
+        return sim, resume
+
+    def _run_context(self, batch: _BatchSetup, model: wd.Model, sim: wd.Simulation, dt: float,
+                     limits: TimeStepLimits, progress: bool, checkpoint: BatchCheckpoint | None,
+                     resume: dict[str, Any] | None) -> RunContext:
+        """The protocol's :class:`RunContext` for one attempt, which logs the batch's size and its
+        time step ``dt`` [s] against the stability limit."""
+        ctx = RunContext(self, sim, batch.fills, progress, checkpoint=checkpoint, resume=resume,
+                         capacities={"max_contacts": batch.max_contacts, "max_neighbours": batch.max_neighbours},
+                         retries=batch.retries)
+        ctx.log(f"{batch.num_worlds} world(s), {model.num_bodies} bodies, {model.num_spheres} spheres, "
+                f"dt={dt:.3g} s (limit {limits.limit:.3g} s)")
+        return ctx
+
+    def _run_protocol(self, batch: _BatchSetup, ctx: RunContext, sim: wd.Simulation,
+                      sim0: float) -> tuple[list[dict[str, Any]], str | None, bool]:
+        """Run the protocol once: (one outcome per world, the error that ended the whole batch or
+        None, whether to run again after a contact slot overflow). ``sim0``:
+        :func:`time.perf_counter` when the attempt began [s]."""
+        outcome: list[dict[str, Any]] = [dict() for _ in range(batch.num_worlds)]
+        fatal = None
+        try:
+            outcome = self.protocol(ctx, batch.t_motion)
+            self._end_protocol(ctx)
+        except ContactOverflowError as exc:
+            fatal = f"{type(exc).__name__}: {exc}"
+            if len(batch.retries) < int(self.overflow_retries):
+                self._grow_slots(batch, ctx, sim, exc, sim0)
+                return outcome, fatal, True
+        except StabilityError as exc:
+            fatal = f"{type(exc).__name__}: {exc}"
+        return outcome, fatal, False
+
+    def _end_protocol(self, ctx: RunContext) -> None:
+        """After the protocol: refuse a resumed run whose protocol ran fewer steps than its
+        checkpoint recorded; save the final checkpoint (unless a finished one was loaded as it is)."""
+        if ctx._resume is not None and ctx._n_steps < len(ctx._done):
+            raise RuntimeError(f"{self.name}: the protocol ran {ctx._n_steps} steps, its checkpoint "
+                               f"recorded {len(ctx._done)}")
+        if ctx._resume is None:  # the end (unless a finished checkpoint was loaded as it is)
+            ctx.save_checkpoint(None)
+
+    def _grow_slots(self, batch: _BatchSetup, ctx: RunContext, sim: wd.Simulation, exc: ContactOverflowError,
+                    sim0: float) -> None:
+        """More contact or neighbour slots per sphere after ``exc`` (1.5 x, neighbours at least
+        1.25 x what the overflow needed), the retry recorded in ``batch.retries`` with the
+        wall time it wasted [s] since ``sim0`` (:func:`time.perf_counter`)."""
+        # slots are sized before the run; a denser packing than expected is not an
+        # error of the user's: run again from the same fill with room to spare
+        if exc.kind == "neighbours":
+            old = sim.solver.max_neighbours
+            batch.max_neighbours = max(int(math.ceil(1.25 * (exc.needed or 0))), int(math.ceil(1.5 * old)))
+            new = batch.max_neighbours
+        else:
+            old = batch.max_contacts
+            batch.max_contacts = new = int(math.ceil(1.5 * batch.max_contacts))
+        batch.retries.append(dict(kind=exc.kind, capacity=old, needed=exc.needed, rerun_with=new,
+                                  wasted_s=round(time.perf_counter() - sim0, 3)))
+        ctx.log(f"{exc.kind} slots overflowed ({exc}); running again with {new} slots per sphere")
+
+    def _batch_timing(self, batch: _BatchSetup, run: _BatchRun, checkpoint: BatchCheckpoint | None,
+                      wall0: float) -> dict[str, Any]:
+        """The ``timing`` every world's result carries: wall, build and simulation times [s],
+        steps, the step [s], simulated phases [s], sizes, capacities, retries and the checkpoint."""
+        model, sim, ctx, nw = run.model, run.sim, run.ctx, batch.num_worlds
+        timing = {"wall_s": round(time.perf_counter() - wall0, 3), "build_s": round(run.build_s, 3),
+                  "simulate_s": round(run.simulate_s, 3), "steps": int(sim.steps),
+                  "steps_this_run": int(sim.steps) - run.steps_before, "dt_s": run.dt,
                   "simulated_s": round(sum(ctx.phases.values()), 6),
                   "phases_s": {k: round(v, 6) for k, v in ctx.phases.items()},
                   "worlds": nw, "spheres": int(model.num_spheres), "bodies": int(model.num_bodies),
                   "spheres_per_world": int(model.num_spheres // nw), "device": str(model.device),
                   "max_contacts": int(model.max_contacts), "max_neighbours": int(sim.solver.max_neighbours),
-                  "retries": retries, "note": "timing is for the whole run (all worlds together, retries included)"}
+                  "retries": batch.retries,
+                  "note": "timing is for the whole run (all worlds together, retries included)"}
         if checkpoint is not None:
             timing["checkpoint"] = checkpoint.summary()
-        protocol = {"scale": self.scale, "settings": self.settings(), "deviations_from_paper": self.deviations_from_paper(),
-                    "contact_law": law.describe(), "material": material.describe(), "t_motion_start_s": t_motion,
-                    "fill": {"particles_per_world": int(fills[0].sample.n),
-                             "mass_per_world_kg": round(fills[0].sample.total_mass, 6),
-                             "loose_top_m": round(max(f.top for f in fills), 6),
-                             "loose_top_bound_m": round(self.loose_top_bound(material), 6),
-                             "above_region": bool(any(f.above_region for f in fills)),
-                             "pours": int(max(f.pours for f in fills))}}
-        results = []
-        for w in range(nw):
-            cp = {n: float(model.get_contact_parameter(n)[w]) for n in model.parameter_names}
-            r = ExperimentResult(self.name, self.scale, w, {**sets[w], **shapes[w]}, cp, angle_name=self.angle_name,
-                                 diagnostics=ctx.diag[w], timing=timing, protocol=protocol)
-            o = outcome[w] if w < len(outcome) else {}
-            r.fit = o.get("fit")
-            r.particles = o.get("particles")
-            r.bulk_density = o.get("bulk_density")
-            if fatal is not None:
-                r.fail(fatal)
-            elif w in unstable:
-                r.fail(f"unstable world ({unstable[w]}): frozen by the engine, its measurement is void")
-            elif ctx.errors[w] is not None:
-                r.fail(ctx.errors[w])
-                # what was measured before the failed measurement stays (A: the fill's bulk density
-                # when no angle could be measured after the lift); the failed quantity is None
-                partial = {k: v for k, v in (o.get("observables") or {}).items() if v is not None}
-                if partial:
-                    r.observables = {**{k: None for k in self.OBSERVABLES},
-                                     **{k: float(v) for k, v in partial.items()}}
-            elif o.get("angle") is None or not math.isfinite(o["angle"]):
-                r.fail("no angle was measured")
-            else:
-                r.angle_deg = float(o["angle"])
-                obs = {k: None for k in self.OBSERVABLES}
-                if self.OBSERVABLES:
-                    obs[next(iter(self.OBSERVABLES))] = r.angle_deg
-                obs.update(o.get("observables") or {})
-                r.observables = {k: (None if v is None else float(v)) for k, v in obs.items()}
-            results.append(r)
-        ctx.log("done: " + ", ".join(f"w{r.world}={r.angle_deg:.2f}" if r.ok else f"w{r.world}=failed" for r in results))
-        return results
+        return timing
+
+    def _protocol_record(self, batch: _BatchSetup) -> dict[str, Any]:
+        """The ``protocol`` every world's result carries: scale, settings, deviations from the
+        paper, contact law, material, motion start [s] and the fill (mass [kg], tops [m])."""
+        fills, material = batch.fills, batch.material
+        return {"scale": self.scale, "settings": self.settings(), "deviations_from_paper": self.deviations_from_paper(),
+                "contact_law": batch.law.describe(), "material": material.describe(),
+                "t_motion_start_s": batch.t_motion,
+                "fill": {"particles_per_world": int(fills[0].sample.n),
+                         "mass_per_world_kg": round(fills[0].sample.total_mass, 6),
+                         "loose_top_m": round(max(f.top for f in fills), 6),
+                         "loose_top_bound_m": round(self.loose_top_bound(material), 6),
+                         "above_region": bool(any(f.above_region for f in fills)),
+                         "pours": int(max(f.pours for f in fills))}}
+
+    def _world_result(self, batch: _BatchSetup, run: _BatchRun, w: int, timing: dict[str, Any],
+                      protocol: dict[str, Any]) -> ExperimentResult:
+        """World ``w``'s result: its parameters, the model's contact parameters, what the protocol
+        measured, and its failure (the batch's, an unstable world, a failed measurement, no angle)."""
+        model = run.model
+        cp = {n: float(model.get_contact_parameter(n)[w]) for n in model.parameter_names}
+        r = ExperimentResult(self.name, self.scale, w, {**batch.sets[w], **batch.shapes[w]}, cp,
+                             angle_name=self.angle_name, diagnostics=run.ctx.diag[w], timing=timing, protocol=protocol)
+        o = run.outcome[w] if w < len(run.outcome) else {}
+        r.fit = o.get("fit")
+        r.particles = o.get("particles")
+        r.bulk_density = o.get("bulk_density")
+        self._judge_world(r, o, run, w)
+        return r
+
+    def _judge_world(self, r: ExperimentResult, o: Mapping[str, Any], run: _BatchRun, w: int) -> None:
+        """Fail world ``w``'s result ``r`` with the first cause that applies, else set its angle
+        [deg] and observables from the protocol's outcome ``o``."""
+        if run.fatal is not None:
+            r.fail(run.fatal)
+        elif w in run.unstable:
+            r.fail(f"unstable world ({run.unstable[w]}): frozen by the engine, its measurement is void")
+        elif run.ctx.errors[w] is not None:
+            r.fail(run.ctx.errors[w])
+            # what was measured before the failed measurement stays (A: the fill's bulk density
+            # when no angle could be measured after the lift); the failed quantity is None
+            partial = {k: v for k, v in (o.get("observables") or {}).items() if v is not None}
+            if partial:
+                r.observables = {**{k: None for k in self.OBSERVABLES},
+                                 **{k: float(v) for k, v in partial.items()}}
+        elif o.get("angle") is None or not math.isfinite(o["angle"]):
+            r.fail("no angle was measured")
+        else:
+            r.angle_deg = float(o["angle"])
+            obs = {k: None for k in self.OBSERVABLES}
+            if self.OBSERVABLES:
+                obs[next(iter(self.OBSERVABLES))] = r.angle_deg
+            obs.update(o.get("observables") or {})
+            r.observables = {k: (None if v is None else float(v)) for k, v in obs.items()}
+
+
+@dataclass
+class _BatchSetup:
+    """One batch of :meth:`Experiment._run` before its model is built: the contact law, the
+    experiment's material and each world's (shape parameters make a world's own), the contact
+    parameters per world and the defaults (by the law's names), the shape parameters per world,
+    the fills (one shared or one per world), the motion start ``t_motion`` [s], and the contact
+    and neighbour slots per sphere with the overflow retries so far (they grow after an overflow
+    and are restored from a checkpoint)."""
+
+    law: wd.ContactLaw
+    material: BulkMaterial
+    sets: list[dict[str, float]]
+    defaults: dict[str, float]
+    shapes: list[dict[str, float]]
+    materials: list[BulkMaterial]
+    fills: list[FillResult]
+    t_motion: float
+    max_contacts: int
+    max_neighbours: int | None
+    retries: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def num_worlds(self) -> int:
+        """Worlds of the batch (one per parameter set)."""
+        return len(self.sets)
+
+
+@dataclass
+class _BatchRun:
+    """The batch's last (or only) attempt of :meth:`Experiment._simulate_batch`: its model,
+    simulation, time step [s] and limits, the protocol's context and per-world outcome, the error
+    that ended the whole batch (None if none), the steps done before this sitting, the build and
+    simulation wall times [s], and the worlds the engine froze as unstable ({world: cause})."""
+
+    model: wd.Model
+    sim: wd.Simulation
+    dt: float
+    limits: TimeStepLimits
+    ctx: RunContext
+    outcome: list[dict[str, Any]]
+    fatal: str | None
+    steps_before: int
+    build_s: float
+    simulate_s: float
+    unstable: dict[int, str]
 
 
 def _contact_slots(materials: Sequence[BulkMaterial]) -> int:
