@@ -220,3 +220,16 @@ def test_campaign_killed_mid_batch_resumes_from_its_checkpoints(tmp_path):
     assert list((out / "checkpoints").iterdir()) == []
     assert json.loads((out / "results.json").read_text())["confirmation"] == \
         json.loads((tmp_path / "reference" / "results.json").read_text())["confirmation"]
+
+
+def test_a_batch_that_grew_its_slots_resumes_from_its_checkpoint(tmp_path):
+    """A batch whose neighbour slots overflowed (and grew) and whose checkpoint is kept after the run
+    (``keep_until_recorded``, as a caller that records elsewhere keeps it) runs again from that
+    checkpoint without failing (it raised UnboundLocalError on the build time) and gives the same
+    observables."""
+    exp = make_experiment("cylinder", "quick", **TINY_CYL, max_neighbours=6)
+    ck = BatchCheckpoints(tmp_path / "ck", 0.5, keep_until_recorded=True)
+    first = exp.run(SETS, device="cpu", checkpoints=ck)
+    assert first[0].timing["retries"]  # the slots did overflow and grow
+    again = exp.run(SETS, device="cpu", checkpoints=ck)
+    assert [r.observables for r in again] == [r.observables for r in first]

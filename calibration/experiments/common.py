@@ -826,6 +826,7 @@ class Experiment:
         """Build the model, continue the saved run if any, and run the protocol; after a contact
         slot overflow, again from the same fill with more slots (at most ``overflow_retries``
         times). ``wall0``: :func:`time.perf_counter` at the start of the run [s]."""
+        build_s = None  # the build of this sitting's first attempt [s] (a resumed batch may have grown slots before)
         while True:
             model, sim, dt, limits = self._build_model(batch.law, batch.material, batch.fills, batch.sets,
                                                        batch.defaults, batch.t_motion, device, batch.max_contacts,
@@ -836,7 +837,7 @@ class Experiment:
             # an unstable world is frozen and failed alone; the others of the batch run on
             sim.on_unstable = "freeze"
             ctx = self._run_context(batch, model, sim, dt, limits, progress, checkpoint, resume)
-            if not batch.retries:
+            if build_s is None:
                 build_s = time.perf_counter() - wall0
             sim0 = time.perf_counter()
             outcome, fatal, again = self._run_protocol(batch, ctx, sim, sim0)
