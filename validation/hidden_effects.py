@@ -159,17 +159,26 @@ def _run_lab(cases: list[str], conds: dict[str, dict[str, dict[str, Any]]], scal
     return experiments, notes, launches
 
 
+#: fill indices between two lab seeds (a lab uses fewer than 100,000: 10,000 per experiment)
+LAB_SEED_STRIDE = 100_000
+
+
 def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: int = 3, device: str | None = None,
-                   processes: Any = "auto", progress: bool = False, dt: float | None = None) -> dict[str, Any]:
+                   processes: Any = "auto", progress: bool = False, dt: float | None = None,
+                   lab_seed: int = 0) -> dict[str, Any]:
     """Run the lab for several cases at once (one launch per experiment and condition group: every
     case, drum speed and repeat is a world) and write each case's measurement file, diagnosis
     config and truth. ``dt`` [s]: a fixed time step for every launch (the diagnosis config then
-    uses the same), else each batch's recommended step."""
+    uses the same), else each batch's recommended step. ``lab_seed``: another lab of the same
+    material and hidden model, i.e. other fills (block ``lab_seed`` of :data:`LAB_SEED_STRIDE`
+    fill indices from :data:`LAB_FILLS`; 0: the shipped labs)."""
+    if isinstance(lab_seed, bool) or not isinstance(lab_seed, int) or not 0 <= lab_seed < 50:
+        raise ValueError(f"lab_seed must be a whole number in [0, 50), got {lab_seed!r}")
     law = wd.ContactLaw.from_config(LAB_LAW)
     mat_cfg = lab_material(scale)
     t0 = time.perf_counter()
     experiments, notes, launches = _run_lab(cases, conditions(scale), scale, repeats, device, processes, progress,
-                                            dt, LAB_FILLS)
+                                            dt, LAB_FILLS + LAB_SEED_STRIDE * lab_seed)
     wall = round(time.perf_counter() - t0, 1)
     out.mkdir(parents=True, exist_ok=True)
     for case in cases:
@@ -186,7 +195,8 @@ def generate_cases(cases: list[str], out: Path, scale: str = "paper", repeats: i
                  "lab_model": {"contact_law": law.to_record(),
                                "material": "elongated family over the size range, aspect_ratio per case "
                                            "(1 = spheres in 5 equal-number size classes)"},
-                 "scale": scale, "repeats": repeats, "dt_s": dt, "notes": notes.get(case, []), "wall_s_all_cases": wall,
+                 "scale": scale, "repeats": repeats, "dt_s": dt, "lab_seed": lab_seed, "notes": notes.get(case, []),
+                 "wall_s_all_cases": wall,
                  "launches": launches,
                  "device": str(device or "default")}
         write_atomic(out / f"truth_{case}.json", json.dumps(truth, indent=1, default=str))
@@ -345,6 +355,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--processes", default="auto")
     ap.add_argument("--progress", action="store_true")
     ap.add_argument("--dt", type=float, default=None, help="fixed time step [s] for the lab and the diagnosis")
+    ap.add_argument("--lab-seed", type=int, default=0, help="another lab of the same hidden model: other fills "
+                    "(0: the shipped labs; 0-49)")
     ap.add_argument("--measure", nargs=3, metavar=("EXPERIMENT", "CONDITION", "SETTINGS_JSON"), default=None,
                     help="measure one more condition of an existing lab (with --truth, --lab, --into), e.g. "
                          "drum 60rpm '{\"rpm\": 60, \"discard\": 1, \"record\": 2}'")
@@ -387,8 +399,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         print(json.dumps(res), flush=True)
         return 0
+    if not 0 <= args.lab_seed < 50:
+        ap.error("--lab-seed must be in 0-49")
     res = generate_cases(list(args.cases), Path(args.out), args.scale, args.repeats or 3, args.device, args.processes,
-                         args.progress, args.dt)
+                         args.progress, args.dt, args.lab_seed)
     print(json.dumps(res), flush=True)
     return 0
 
