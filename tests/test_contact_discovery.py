@@ -80,9 +80,14 @@ def clean_registry():
 
 
 def test_builtins_found_by_scanning_the_package():
+    """The package's own sub-models (a plugin another test loaded may be registered too: it is not
+    a built-in, so it is left out of the comparison, whatever order the tests run in)."""
+    def builtins(kind: str) -> list[str]:
+        return [n for n in contact.available(kind) if contact.REGISTRY[kind][n].__module__.startswith("warpdem.")]
+
     assert {"hertz_mindlin", "none", "rolling", "cohesion"} <= set(contact.BUILTIN_MODULES)
-    assert contact.available("cohesion") == ["none", "sjkr", "sjkr2", "sjkr2_reduced", "sjkr_reduced"]
-    assert contact.available("rolling") == ["cdt", "cdt_body_arm", "cdt_liggghts", "epsd", "epsd2", "none"]
+    assert builtins("cohesion") == ["none", "sjkr", "sjkr2", "sjkr2_reduced", "sjkr_reduced"]
+    assert builtins("rolling") == ["cdt", "cdt_body_arm", "cdt_liggghts", "epsd", "epsd2", "none"]
 
 
 def test_a_new_file_in_the_package_folder_is_one_new_effect(tmp_path, monkeypatch):
