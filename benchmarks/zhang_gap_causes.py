@@ -79,7 +79,6 @@ is a smoke test (sphere materials; no comparison with EDEM).
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import os
@@ -99,6 +98,8 @@ sys.path.insert(0, str(ROOT))
 
 import warpdem as wd  # noqa: E402
 from warpdem import ConfigError  # noqa: E402
+from warpdem.json_io import jsonable  # noqa: E402
+from warpdem.provenance import json_digest  # noqa: E402
 
 from calibration import campaign as cp  # noqa: E402
 from calibration.campaign_records import code_version  # noqa: E402
@@ -336,7 +337,7 @@ def setup_key(variant: str, experiment: str, scale: str, overrides: Mapping[str,
     doc = {"variant": variant, "overrides": overrides_of_variant,
            "experiment": experiment, "scale": scale, "settings": overrides, "law": exp.contact_law.describe(),
            "material": exp.bulk_material().name}
-    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
+    return json_digest(doc, 12, default=str)
 
 
 def expected_seconds(variant: str, experiment: str, worlds: int, on_gpu: bool) -> float | None:
@@ -439,7 +440,8 @@ def deviations(exp) -> dict[str, Any]:
 
 
 def _jsonable(x: Any) -> Any:
-    return json.loads(json.dumps(x, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+    """Plain JSON values (:func:`warpdem.json_io.jsonable`: numpy values, NaN -> null), anything else as text."""
+    return json.loads(json.dumps(jsonable(x), default=str))
 
 
 def append_lines(path: Path, lines: list[dict[str, Any]]) -> None:
