@@ -464,28 +464,38 @@ def release_batches(sim, bodies: np.ndarray, drop: np.ndarray, gap: float = 0.0)
     first, count = h["body_first"], h["body_count"]
     done = np.zeros(len(bodies), dtype=bool)
     for w in np.unique(h["body_world"][bodies]):
+        cand = np.nonzero(h["body_world"][bodies] == w)[0]  # positions in ``bodies``, in their order
+        # the candidates' spheres where they would be inserted, and which candidate owns each
+        owner = np.concatenate([np.full(int(count[bodies[j]]), k) for k, j in enumerate(cand)])
+        idx = np.concatenate([np.arange(int(first[bodies[j]]), int(first[bodies[j]] + count[bodies[j]]))
+                              for j in cand])
+        xc = x[idx] - np.stack([np.zeros(len(idx)), np.zeros(len(idx)), drop[cand][owner]], axis=1)
+        rc = sr[idx]
+        tree_c = cKDTree(xc)
+        blocked = np.zeros(len(cand), dtype=bool)  # overlaps an active sphere of the world
         on = (active[sb] != 0) & (sw == w)
-        xa, ra = x[on], sr[on]
-        tree = cKDTree(xa) if len(xa) else None
-        ra_max = float(ra.max()) if len(ra) else 0.0
-        new_x, new_r = np.zeros((0, 3)), np.zeros(0)
-        for j in np.nonzero(h["body_world"][bodies] == w)[0]:
-            b = bodies[j]
-            s = slice(int(first[b]), int(first[b] + count[b]))
-            xm = x[s] - np.array([0.0, 0.0, drop[j]])
-            rm = sr[s]
-            clear = True
-            if tree is not None:
-                for xi, ri, near in zip(xm, rm, tree.query_ball_point(xm, rm + ra_max + gap)):
-                    if near and np.any(np.linalg.norm(xa[near] - xi, axis=1) < ri + ra[near] + gap):
-                        clear = False
-                        break
-            if clear and len(new_r):
-                d = np.linalg.norm(xm[:, None, :] - new_x[None, :, :], axis=2)
-                clear = bool(np.all(d >= rm[:, None] + new_r[None, :] + gap))
-            if clear:
-                done[j] = True
-                new_x, new_r = np.concatenate([new_x, xm]), np.concatenate([new_r, rm])
+        if on.any():
+            xa, ra = x[on], sr[on]
+            reach = float(ra.max() + rc.max() + gap)
+            pairs = tree_c.sparse_distance_matrix(cKDTree(xa), reach, output_type="ndarray")
+            hit = pairs["v"] < rc[pairs["i"]] + ra[pairs["j"]] + gap
+            blocked[np.unique(owner[pairs["i"][hit]])] = True
+        # candidates overlapping each other: the later one waits if the earlier one goes in
+        pairs = tree_c.query_pairs(float(2.0 * rc.max() + gap), output_type="ndarray")
+        if len(pairs):
+            a, b = owner[pairs[:, 0]], owner[pairs[:, 1]]
+            dist = np.linalg.norm(xc[pairs[:, 0]] - xc[pairs[:, 1]], axis=1)
+            clash = (a != b) & (dist < rc[pairs[:, 0]] + rc[pairs[:, 1]] + gap)
+            earlier: dict[int, set[int]] = {}
+            for first_in, later in zip(np.minimum(a, b)[clash], np.maximum(a, b)[clash]):
+                earlier.setdefault(int(later), set()).add(int(first_in))
+        else:
+            earlier = {}
+        ok = ~blocked
+        for k in sorted(earlier):  # in the candidates' order, as they go in one after another
+            if ok[k] and any(ok[e] for e in earlier[k]):
+                ok[k] = False
+        done[cand] = ok
     moved = bodies[done]
     if moved.size:
         q[moved, 2] = (q[moved, 2].astype(float) - drop[done]).astype(np.float32)

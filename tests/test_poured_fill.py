@@ -189,3 +189,50 @@ def test_a_poured_batch_killed_mid_pour_continues_from_its_checkpoint(tmp_path, 
     assert resumed[0].timing["checkpoint"]["resumed"]["in_step"] == "advance:pour"
     assert outcome(resumed) == outcome(reference)
     assert all(np.array_equal(a.particles[0], b.particles[0]) for a, b in zip(resumed, reference))
+
+
+def test_release_order_and_overlap_rules_without_a_model():
+    """LIGGGHTS' ``overlapcheck``: a waiting body goes in unless it would overlap an active sphere of
+    its world or a body inserted before it in the same release; one that waits does not block later
+    ones. Four single-sphere bodies of radius 0.01 m in one world, body 0 active at the origin."""
+    import numpy as np
+
+    from calibration.filling import release_batches
+
+    class Arr:
+        def __init__(self, a):
+            self.a = np.array(a)
+
+        def numpy(self):
+            return self.a
+
+        def assign(self, b):
+            self.a = np.array(b)
+
+    class FakeSim:
+        def __init__(self, centres):
+            n = len(centres)
+            self.x = np.array(centres, float)
+            self.model = type("M", (), {})()
+            self.model.host = {"sphere_body": np.arange(n), "sphere_radius": np.full(n, 0.01, np.float32),
+                               "sphere_world": np.zeros(n, int), "body_first": np.arange(n),
+                               "body_count": np.ones(n, int), "body_world": np.zeros(n, int)}
+            self.state = type("S", (), {})()
+            self.state.body_q = Arr(np.c_[self.x, np.zeros((n, 4))].astype(np.float32))
+            self.state.body_active = Arr([1] + [0] * (n - 1))
+            self.state.body_v, self.state.body_w = Arr(np.ones((n, 3))), Arr(np.ones((n, 3)))
+            self.solver = type("V", (), {"invalidate_views": lambda s: None,
+                                         "request_neighbour_rebuild": lambda s: None})()
+
+        def sphere_positions(self):
+            return self.x
+
+    # after the drop of 0.1 m: body 1 lands 0.015 m from the active body 0 (blocked), body 2 lands free,
+    # body 3 lands 0.015 m from body 2 (waits: 2 went in first), body 4 lands 0.015 m from body 1 (free:
+    # body 1 stayed out)
+    sim = FakeSim([[0, 0, 0], [0.015, 0, 0.1], [0.2, 0, 0.1], [0.215, 0, 0.1], [0.015, 0.015, 0.1]])
+    done = release_batches(sim, np.array([1, 2, 3, 4]), np.full(4, 0.1))
+    assert done.tolist() == [False, True, False, True]
+    assert sim.state.body_active.a.tolist() == [1, 0, 1, 0, 1]
+    assert sim.state.body_q.a[[2, 4], 2] == pytest.approx(0.0, abs=1e-6) and sim.state.body_q.a[3, 2] == pytest.approx(0.1)  # float32
+    assert np.all(sim.state.body_v.a[[2, 4]] == 0) and np.all(sim.state.body_v.a[[1, 3]] == 1)
