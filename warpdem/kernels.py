@@ -490,11 +490,14 @@ def deactivate_outside(
     lower: wp.vec3,
     upper: wp.vec3,
     active: wp.array(dtype=int),
+    body_world: wp.array(dtype=int),
+    world_on: wp.array(dtype=int),
     removed: wp.array(dtype=int),
 ):
-    """Remove (deactivate) bodies whose centre leaves the box [lower, upper]; counts removals."""
+    """Remove (deactivate) bodies of the worlds with ``world_on`` != 0 whose centre leaves the box
+    [lower, upper]; counts removals."""
     b = wp.tid()
-    if active[b] == 0:
+    if active[b] == 0 or world_on[body_world[b]] == 0:
         return
     x = body_q[b]
     if x[0] < lower[0] or x[1] < lower[1] or x[2] < lower[2] or x[0] > upper[0] or x[1] > upper[1] or x[2] > upper[2]:

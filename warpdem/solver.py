@@ -1038,21 +1038,16 @@ class Simulation:
         """Deactivate bodies whose centre is outside the box; returns how many were removed now.
         ``worlds``: only those of these worlds (indices or a boolean mask over worlds; None: all)."""
         m = self.model
+        on = np.ones(m.num_worlds, dtype=np.int32)
         if worlds is not None:
-            sel = np.zeros(m.num_worlds, dtype=bool)
-            sel[np.asarray(worlds)] = True
-            q = self.state.body_q.numpy()
-            active = self.state.body_active.numpy().copy()
-            lo, hi = np.asarray(lower, dtype=np.float32), np.asarray(upper, dtype=np.float32)
-            out = (active != 0) & sel[m.host["body_world"]] & np.any((q < lo) | (q > hi), axis=1)
-            if out.any():  # the same test as the kernel's, on the same float32 numbers
-                active[out] = 0
-                self.state.body_active.assign(active)
-                self.solver.invalidate_views()
-            return int(out.sum())
+            on[:] = 0
+            on[np.asarray(worlds)] = 1
+            if not on.any():
+                return 0
         removed = wp.zeros(1, dtype=int, device=m.device)
         wp.launch(kernels.deactivate_outside, dim=m.num_bodies,
-                  inputs=[self.state.body_q, wp.vec3(*lower), wp.vec3(*upper), self.state.body_active, removed],
+                  inputs=[self.state.body_q, wp.vec3(*lower), wp.vec3(*upper), self.state.body_active, m.body_world,
+                          wp.array(on, dtype=int, device=m.device), removed],
                   device=m.device)
         self.solver.invalidate_views()
         return int(removed.numpy()[0])
