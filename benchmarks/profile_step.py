@@ -11,7 +11,7 @@ same launches on a step without a rebuild (``rebuild_skipped``), contact stages,
 averaged over --repeats steps, plus the bytes a step must at least move per sphere and the
 effective bandwidth that implies. On CUDA also ``kernels_ms_per_step``: milliseconds per step
 of each kernel over --repeats ungraphed steps (Warp's CUDA activity timing, summed per kernel
-name, as in step_cost.py); left out on the CPU, where that timing is not available.
+name, as in step_cost.py; on the CPU each launch timed on the host clock).
 ``--load-state``: start from a settled State saved by ``settled_bed.py --save-state`` (same
 --spheres, --rolling and --order) instead of running --settle-time.
 """
@@ -134,8 +134,8 @@ def main(argv=None):
                state_from=args.load_state or f"{args.settle_time} s settled here", contacts_per_sphere=round(k_avg, 3),
                ms=stages, sphere_steps_per_s=float(f"{n / (ms * 1e-3):.4g}"),
                min_bytes_per_sphere_step=round(bytes_per_sphere), effective_GBps=round(n * bytes_per_sphere / (ms * 1e-3) / 1e9, 1))
-    if wp.get_device(device).is_cuda:  # CUDA activity timing; advances the simulation (last)
-        out["kernels_ms_per_step"] = kernel_breakdown(sim, args.repeats)
+    # CUDA activity timing, or each launch timed on the host on the CPU; advances the simulation (last)
+    out["kernels_ms_per_step"] = kernel_breakdown(sim, args.repeats)
     print(json.dumps(out), flush=True)
 
 

@@ -59,7 +59,10 @@ def per_step_ms(sim: wd.Simulation, steps: int, device: str) -> float:
 
 def kernel_breakdown(sim: wd.Simulation, steps: int) -> dict[str, float]:
     """Milliseconds per step of each kernel (and memcpy/memset) over ``steps`` ungraphed steps
-    (Warp's CUDA activity timing, summed per name; largest first). CUDA only."""
+    (Warp's CUDA activity timing, summed per name; largest first). On the CPU, where launches run
+    synchronously on the calling thread, each ``wp.launch`` is timed on the host clock instead."""
+    if not wp.get_device(sim.model.device).is_cuda:
+        return cpu_kernel_breakdown(sim, steps)
     wp.timing_begin(cuda_filter=wp.TIMING_ALL)
     for _ in range(steps):
         sim.solver.step(sim.state, sim._next)
@@ -68,6 +71,31 @@ def kernel_breakdown(sim: wd.Simulation, steps: int) -> dict[str, float]:
     out: dict[str, float] = {}
     for r in res:
         out[r.name] = out.get(r.name, 0.0) + r.elapsed / steps
+    return {k: round(v, 4) for k, v in sorted(out.items(), key=lambda kv: -kv[1])}
+
+
+def cpu_kernel_breakdown(sim: wd.Simulation, steps: int) -> dict[str, float]:
+    """:func:`kernel_breakdown` on the CPU: every ``wp.launch`` of ``steps`` ungraphed steps timed
+    with ``time.perf_counter`` (a CPU launch returns when the kernel has run), summed per kernel key."""
+    import time
+
+    out: dict[str, float] = {}
+    launch = wp.launch
+
+    def timed_launch(kernel, *args, **kwargs):
+        t0 = time.perf_counter()
+        result = launch(kernel, *args, **kwargs)
+        name = getattr(kernel, "key", str(kernel))
+        out[name] = out.get(name, 0.0) + (time.perf_counter() - t0) * 1e3 / steps
+        return result
+
+    wp.launch = timed_launch
+    try:
+        for _ in range(steps):
+            sim.solver.step(sim.state, sim._next)
+            sim.state, sim._next = sim._next, sim.state
+    finally:
+        wp.launch = launch
     return {k: round(v, 4) for k, v in sorted(out.items(), key=lambda kv: -kv[1])}
 
 

@@ -388,13 +388,22 @@ def integrate_bodies_kernel(place_members_after: bool = False) -> "wp.Kernel":
         wf = bodies_in.w[b]
         w0 = wp.vec3d(wp.float64(wf[0]), wp.float64(wf[1]), wp.float64(wf[2]))
         h = wp.float64(dt)
-        l_world = wp.quat_rotate(r, wp.cw_mul(inertia, wp.quat_rotate_inv(r, w0))) + wp.vec3d(
-            wp.float64(t[0]), wp.float64(t[1]), wp.float64(t[2])) * h
-        w_half = angular_velocity_from_momentum(r, l_world, inertia)
-        for _sweep in range(3):
-            w_half = angular_velocity_from_momentum(rotate_by(r, w_half, wp.float64(0.5) * h), l_world, inertia)
-        r_new64 = rotate_by(r, w_half, h)
-        w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
+        torque_h = wp.vec3d(wp.float64(t[0]), wp.float64(t[1]), wp.float64(t[2])) * h
+        r_new64 = r
+        w_new64 = w0
+        if inertia_f[0] == inertia_f[1] and inertia_f[1] == inertia_f[2]:
+            # isotropic body (every single sphere): L = I w whatever the orientation, so the
+            # midpoint sweeps below return w_half = w' = w + T dt / I at once; the same update
+            # without them (equal to their result up to float64 rounding)
+            w_new64 = w0 + torque_h / inertia[0]
+            r_new64 = rotate_by(r, w_new64, h)
+        else:
+            l_world = wp.quat_rotate(r, wp.cw_mul(inertia, wp.quat_rotate_inv(r, w0))) + torque_h
+            w_half = angular_velocity_from_momentum(r, l_world, inertia)
+            for _sweep in range(3):
+                w_half = angular_velocity_from_momentum(rotate_by(r, w_half, wp.float64(0.5) * h), l_world, inertia)
+            r_new64 = rotate_by(r, w_half, h)
+            w_new64 = angular_velocity_from_momentum(r_new64, l_world, inertia)
         r_new = wp.quat(float(r_new64[0]), float(r_new64[1]), float(r_new64[2]), float(r_new64[3]))
         w_new = wp.vec3(float(w_new64[0]), float(w_new64[1]), float(w_new64[2]))
         bodies_out.q[b] = x
