@@ -2,7 +2,9 @@
 replaced: five short CPU scenes (and one contact launch with ``walls_on=False``) are run and their body positions, velocities, contact
 counts and wall wear compared with values saved from the single-kernel code
 (tests/data/contact_stages_reference.npz, written by ``python tests/test_contact_stages.py --write``
-with the engine of commit 3cede01, before the split).
+with the engine of commit 3cede01, before the split). The scenes run with
+``pair_evaluation="full"``, the evaluation the reference was taken with (the CPU's ``"half"`` is
+checked against it in tests/test_pair_evaluation.py).
 
 Tolerance: the stages evaluate every contact with the same float32 operations in the same
 order (wall contacts first, then the neighbour list; the particle stage continues the wall
@@ -53,7 +55,8 @@ def scene_drum() -> wd.Simulation:
     b.add_wall(drum, wd.PLEXIGLAS, world=0, motion=wd.WallMotion.rotation((0, 1, 0), 30.0), name="drum 0")
     b.add_wall(drum, wd.PLEXIGLAS, world=1, motion=wd.WallMotion.rotation((0, 1, 0), -60.0), name="drum 1")
     b.set_contact_parameters(mu_s_pp=[0.3, 0.6], mu_s_pw=[0.5, 0.2], restitution_pp=0.5)
-    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=2e-5, use_graph=False)
+    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=2e-5, use_graph=False,
+                         pair_evaluation="full")
 
 
 def scene_clumps() -> wd.Simulation:
@@ -71,7 +74,8 @@ def scene_clumps() -> wd.Simulation:
                    velocity=rng.normal(0.0, 0.5, 3) + (0.0, 0.0, -1.0), angular_velocity=rng.normal(0.0, 50.0, 3))
     b.add_wall(geometry.open_box((0.0, 0.0, 0.0), (0.05, 0.05, 0.06)), wd.PLEXIGLAS)
     b.set_contact_parameters(mu_r_pp=0.1, mu_r_pw=0.05)
-    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False)
+    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False,
+                         pair_evaluation="full")
 
 
 def scene_cohesion_epsd2() -> wd.Simulation:
@@ -87,7 +91,8 @@ def scene_cohesion_epsd2() -> wd.Simulation:
     b.add_wall(geometry.plane((0.0, 0.0, 0.0), 0.2, 0.2, normal=(0.1, 0.0, 1.0), subdivisions=8), "gravel")
     b.set_contact_parameters(cohesion_energy_density_pp=2e5, cohesion_energy_density_pw=1e5, mu_r_pp=0.2,
                              mu_r_pw=0.1)
-    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False)
+    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False,
+                         pair_evaluation="full")
 
 
 def scene_wear() -> wd.Simulation:
@@ -101,7 +106,8 @@ def scene_wear() -> wd.Simulation:
     b.add_wall(geometry.plane((0.0, 0.0, 0.0), 0.1, 0.1, subdivisions=20), "gravel",
                motion=wd.WallMotion.translation((-0.3, 0.1, 0.0)), name="plate")
     b.set_contact_parameters(mu_s_pw=0.4, restitution_pw=0.5)
-    return wd.Simulation(b.finalize("cpu"), dt=2e-5, use_graph=False)
+    return wd.Simulation(b.finalize("cpu"), dt=2e-5, use_graph=False,
+                         pair_evaluation="full")
 
 
 def scene_no_walls() -> wd.Simulation:
@@ -121,7 +127,8 @@ def scene_no_walls() -> wd.Simulation:
         centre = pos.mean(axis=0)
         b.add_spheres(pos[8:], R, "gravel", world=w, velocities=(centre - pos[8:]) * 150.0)
     b.set_contact_parameters(mu_r_pp=[0.05, 0.2])
-    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False)
+    return wd.Simulation(b.finalize("cpu", overlap_tolerance=0.2), dt=1e-5, use_graph=False,
+                         pair_evaluation="full")
 
 
 SCENES = {"drum": scene_drum, "clumps": scene_clumps, "cohesion_epsd2": scene_cohesion_epsd2, "wear": scene_wear,

@@ -139,7 +139,7 @@ def test_poured_fill_packs_denser_than_the_loose_one():
 
 
 def test_poured_cylinder_fill_ends_inside_the_tube(monkeypatch):
-    exp = HollowCylinder.from_config("quick", fill_mass=1.0, fill_mode="poured", lift_speed=0.5,
+    exp = HollowCylinder.from_config("quick", fill_mass=1.5, fill_mode="poured", lift_speed=0.5,
                                      max_time_after_lift=0.3)
     seen = []
     real_plan = HollowCylinder._lift_plan
@@ -162,7 +162,7 @@ def test_poured_cylinder_fill_ends_inside_the_tube(monkeypatch):
 def test_a_poured_world_does_not_depend_on_its_batch():
     """The pour's schedule follows the settings and the material, and each world's batches are
     released against its own particles: a world alone and in a batch of two pour alike, bit for bit."""
-    kw = dict(fill_mass=1.0, fill_mode="poured", lift_speed=0.5, max_time_after_lift=0.2, fill_per_world=True)
+    kw = dict(fill_mass=1.5, fill_mode="poured", lift_speed=0.5, max_time_after_lift=0.2, fill_per_world=True)
     pair = HollowCylinder.from_config("quick", **kw).run([FRICTION, dict(mu_s_pp=0.3, mu_s_pw=0.3)], device="cpu")
     (alone,) = HollowCylinder.from_config("quick", **kw).run([FRICTION], device="cpu")
     assert pair[0].ok and alone.ok, (pair[0].error, alone.error)

@@ -75,6 +75,9 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                     help="CUDA register cap per thread of the wall- and particle-force kernels: an integer, 'none' "
                          "(the compiler's choice) or 'auto' (default: 80 for models of more than 2 x SMs x 512 "
                          "spheres)")
+    ap.add_argument("--pair-evaluation", default="auto", choices=["auto", "full", "half"],
+                    help="sphere pairs evaluated from both sides or once with the reaction added to the partner "
+                         "(default auto: half on the CPU where the law allows it, full on a GPU)")
     ap.add_argument("--wear-lanes", type=option_value, default="auto",
                     help="copies of the wall wear accumulators (default auto: 32 on a GPU, 1 on the CPU)")
 
@@ -146,7 +149,8 @@ def used_solver_options(solver: wd.DEMSolver) -> dict:
     return dict(neighbour_search=solver.neighbour_search, wall_stage=solver.wall_stage,
                 neighbour_layout=solver.neighbour_layout, history_layout=solver.history_layout,
                 fused_placement=solver.fused_placement, wall_candidates=solver.wall_candidates,
-                force_registers=solver.force_registers, wear_lanes=solver.wall_stats.lanes)
+                force_registers=solver.force_registers, wear_lanes=solver.wall_stats.lanes,
+                pair_evaluation=solver.pair_evaluation)
 
 
 def solver_options(args: argparse.Namespace) -> dict:
@@ -154,7 +158,8 @@ def solver_options(args: argparse.Namespace) -> dict:
     return dict(neighbour_search=args.neighbour_search, wall_stage=args.wall_stage,
                 neighbour_layout=args.neighbour_layout, history_layout=args.history_layout,
                 fused_placement=args.fused_placement, wall_candidates=args.wall_candidates,
-                force_registers=args.force_registers, wear_lanes=args.wear_lanes)
+                force_registers=args.force_registers, wear_lanes=args.wear_lanes,
+                pair_evaluation=args.pair_evaluation)
 
 
 
@@ -292,7 +297,7 @@ def main(argv=None) -> dict:
         settle_sim_time, t_settle, seconds = settle_and_time(sim, device, args.settle_time, args.warmup, args.steps,
                                                              on_settled=save)
     ke = sim.kinetic_energy() / args.spheres
-    counts = sim.state.contact_count.numpy()
+    counts = sim.solver.contact_counts(sim.state)
     n_total = args.spheres * args.worlds
     bytes_per_sphere = min_bytes_per_sphere_step(float(counts.mean()))
     result = dict(

@@ -245,11 +245,17 @@ class State:
 
     Contact history uses ``max_contacts`` slots per sphere: partner (sphere index >= 0, or
     ``-(wall + 1)`` for a wall), tangential spring [m], rolling history, wall normal.
-    ``model_fingerprint``: the :attr:`Model.fingerprint` of the model it belongs to.
+    ``model_fingerprint``: the :attr:`Model.fingerprint` of the model it belongs to. With a
+    solver's ``pair_evaluation="half"`` (the CPU's default) a sphere pair is kept by its
+    higher-index sphere only (``contact_rows``; :mod:`warpdem.contact_rows`);
+    :meth:`~warpdem.solver.DEMSolver.contact_counts` counts each sphere's contacts either way.
     """
 
     def __init__(self, model: Model) -> None:
         self.model_fingerprint: str = model.fingerprint
+        # the pair evaluation its contact rows were written with ("full", "half"; None: none yet or
+        # unknown), set by the solver that steps it (warpdem.contact_rows)
+        self.contact_rows: str | None = None
         d = model.device
         ini = model.initial
         k = model.max_contacts
@@ -298,6 +304,7 @@ class State:
                               f"this one of model {self.model_fingerprint}")
         for name in self.ARRAYS:
             wp.copy(getattr(self, name), getattr(other, name))
+        self.contact_rows = other.contact_rows
 
     @property
     def sim_time(self) -> float:

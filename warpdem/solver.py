@@ -8,7 +8,7 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from . import kernels, layouts, stages
+from . import contact_rows, kernels, layouts, stages
 from .errors import ConfigError, ContactOverflowError, StabilityError, StabilityWarning
 from .model import Model, State
 from .stages.cell_list import CellList, build_neighbour_list_from_cells_kernel
@@ -32,6 +32,8 @@ DEFAULT_NEIGHBOUR_LAYOUT = "auto"
 DEFAULT_HISTORY_LAYOUT = "auto"
 # whether the integrator places the member spheres (DEMSolver's fused_placement); "auto" picks by device
 DEFAULT_FUSED_PLACEMENT = "auto"
+# how sphere-sphere pairs are evaluated (DEMSolver's pair_evaluation); "auto" picks by device and law
+DEFAULT_PAIR_EVALUATION = "auto"
 # slots per sphere for the triangles of moving walls it may touch (DEMSolver's wall_candidates);
 # 0: query the moving walls' BVHs every step
 DEFAULT_WALL_CANDIDATES = 32
@@ -68,6 +70,27 @@ def resolve_performance_options(on_gpu: bool, neighbour_layout: str = "auto", hi
                               f"got {fused_placement!r}")
         fused_placement = choices[fused_placement]
     return out[0], out[1], bool(fused_placement)
+
+
+def resolve_pair_evaluation(on_gpu: bool, law, pair_evaluation: str = "auto") -> str:
+    """``"full"`` or ``"half"`` for a solver's ``pair_evaluation``. ``"auto"``: ``"half"`` on the CPU
+    when the law allows it (:attr:`ContactLaw.pair_antisymmetric`), else ``"full"``. ``"half"`` is
+    refused on a GPU (its per-sphere rows without atomics keep results bitwise reproducible there)
+    and for a law that does not allow it."""
+    from .stages import PAIR_EVALUATIONS
+
+    if pair_evaluation == "auto":
+        return "half" if (not on_gpu and law.pair_antisymmetric) else "full"
+    if pair_evaluation not in PAIR_EVALUATIONS:
+        raise ConfigError(f"pair_evaluation must be one of {PAIR_EVALUATIONS + ('auto',)}, got {pair_evaluation!r}")
+    if pair_evaluation == "half" and on_gpu:
+        raise ConfigError("pair_evaluation='half' runs on the CPU only (on a GPU every sphere sums its own row: "
+                          "no atomics, bitwise reproducible); use 'full' or 'auto'")
+    if pair_evaluation == "half" and not law.pair_antisymmetric:
+        odd = [f"{k}:{s.name}" for k, s in law.submodels.items() if not getattr(s, "pair_antisymmetric", False)]
+        raise ConfigError(f"pair_evaluation='half' needs sub-models whose pair force is antisymmetric; "
+                          f"{', '.join(odd)} do not declare it (pair_antisymmetric); use 'full' or 'auto'")
+    return pair_evaluation
 
 
 def body_states(state: State) -> kernels.BodyStates:
@@ -352,9 +375,10 @@ class DEMSolver:
                  neighbour_layout: str = DEFAULT_NEIGHBOUR_LAYOUT, history_layout: str = DEFAULT_HISTORY_LAYOUT,
                  fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT,
                  wall_candidates: int = DEFAULT_WALL_CANDIDATES, force_registers: int | str | None = "auto",
-                 wear_lanes: int | str = "auto") -> None:
+                 wear_lanes: int | str = "auto", pair_evaluation: str = DEFAULT_PAIR_EVALUATION) -> None:
         self.model = model
         self.conditional_rebuild = bool(conditional_rebuild)
+        self.pair_evaluation = resolve_pair_evaluation(model.device.is_cuda, model.contact_law, pair_evaluation)
         if neighbour_search not in NEIGHBOUR_SEARCHES:
             raise ConfigError(f"neighbour_search must be one of {NEIGHBOUR_SEARCHES}, got {neighbour_search!r}")
         self.neighbour_search = neighbour_search
@@ -377,6 +401,7 @@ class DEMSolver:
         k = model.max_contacts
         self.sphere_f = wp.zeros(n, dtype=wp.vec3, device=d)
         self.sphere_t = wp.zeros(n, dtype=wp.vec3, device=d)
+        self.half_reactions = wp.zeros(n if self.pair_evaluation == "half" else 1, dtype=int, device=d)
         # this step's wall contacts, from the wall-collection stage to the wall-force stage
         self.wall_count = wp.zeros(n, dtype=int, device=d)
         self.slot_point = wp.zeros(n * k, dtype=wp.vec3, device=d)
@@ -446,7 +471,8 @@ class DEMSolver:
         self.candidate_x = wp.zeros(cand_rows, dtype=wp.vec3, device=d)
         self.candidate_t = wp.zeros(cand_rows, dtype=wp.float64, device=d)
         self.force_registers = resolve_register_cap(force_registers, d, n)
-        self.stages = stages.contact_stages(model.contact_law, neighbour_layout, history_layout, self.force_registers)
+        self.stages = stages.contact_stages(model.contact_law, neighbour_layout, history_layout, self.force_registers,
+                                            self.pair_evaluation)
         self.pack_contact_inputs()
         # body-force models (warpdem.body_forces): launched after the contacts, summed into one
         # per-body force that the integrator adds (with the external force, if used)
@@ -489,6 +515,11 @@ class DEMSolver:
             bad = state_in if state_in.model_fingerprint != fp else state_out
             raise ConfigError(f"step: a State of model {bad.model_fingerprint} was given to the solver of "
                               f"model {fp}; make States with this model's model.state()")
+        if state_in.contact_rows not in (None, self.pair_evaluation):
+            raise ConfigError(f"step: the State's contact rows were written with pair_evaluation="
+                              f"'{state_in.contact_rows}', this solver uses '{self.pair_evaluation}'; move a State "
+                              f"between such solvers with export_state / import_state")
+        state_in.contact_rows = state_out.contact_rows = self.pair_evaluation
         d = m.device
         if self.fused_placement:
             self._place_spheres_on_request(state_in)
@@ -642,6 +673,8 @@ class DEMSolver:
         n, k = self.model.num_spheres, self.model.max_contacts
         for name in HISTORY_ARRAYS:
             data[name] = layouts.to_sphere_major(data[name], self.history_layout, n, k)
+        if self.pair_evaluation == "half":  # checkpoints hold full rows (warpdem.contact_rows)
+            data = contact_rows.half_rows_to_full(data, n, k)
         return data
 
     def import_state(self, state: State, data: dict[str, np.ndarray], fingerprint: str | None = None) -> None:
@@ -649,11 +682,21 @@ class DEMSolver:
         solver's layout (``fingerprint``: as in :meth:`State.load_numpy`)."""
         n, k = self.model.num_spheres, self.model.max_contacts
         data = dict(data)
+        if self.pair_evaluation == "half" and all(name in data for name in HISTORY_ARRAYS + ("contact_count",)):
+            data = contact_rows.full_rows_to_half(data, n, k)
         for name in HISTORY_ARRAYS:
             if name in data:
                 data[name] = layouts.from_sphere_major(data[name], self.history_layout, n, k)
         state.load_numpy(data, fingerprint=fingerprint)
+        state.contact_rows = self.pair_evaluation
         self.invalidate_views()
+
+    def contact_counts(self, state: State) -> np.ndarray:
+        """Each sphere's contacts in ``state`` (walls and spheres, each pair counted for both of its
+        spheres, whatever the pair evaluation; ``state.contact_count`` holds a row's entries)."""
+        n, k = self.model.num_spheres, self.model.max_contacts
+        partner = layouts.to_sphere_major(state.contact_partner.numpy(), self.history_layout, n, k)
+        return contact_rows.contacts_per_sphere(state.contact_count.numpy(), partner, n, k, self.pair_evaluation)
 
     def pack_contact_inputs(self) -> None:
         """Pack the model's and the solver's arrays that the contact stages and the
@@ -708,6 +751,7 @@ class DEMSolver:
         forces = stages.SphereForces()
         forces.force = self.sphere_f
         forces.torque = self.sphere_t
+        forces.reactions = self.half_reactions
         self._packed = stages.PackedInputs(spheres, neighbours, walls, params, found, wear, forces, candidates)
         members = kernels.MemberPlacement()
         members.body, members.first, members.count = m.sphere_body, m.body_first, m.body_count
@@ -804,8 +848,12 @@ class DEMSolver:
             wp.launch(st.wall_forces, dim=n,
                       inputs=[p.spheres, p.walls, p.params, step, history, contacts, p.found, p.wear, p.forces],
                       device=d)
+        if self.pair_evaluation == "half":
+            wp.launch(stages.start_half_pair_sums, dim=n, inputs=[step, p.found, p.forces], device=d)
         wp.launch(st.particle_forces, dim=n,
                   inputs=[p.spheres, p.neighbours, p.params, step, history, contacts, p.found, p.forces], device=d)
+        if self.pair_evaluation == "half":
+            wp.launch(stages.check_half_row_slots, dim=n, inputs=[step, contacts, p.forces], device=d)
 
     # ---------------------------------------------------------------- checks
     def check(self, on_unstable: str = "raise") -> dict[int, str]:
@@ -897,7 +945,7 @@ class Simulation:
                  history_layout: str = DEFAULT_HISTORY_LAYOUT,
                  fused_placement: bool | str = DEFAULT_FUSED_PLACEMENT,
                  wall_candidates: int = DEFAULT_WALL_CANDIDATES, force_registers: int | str | None = "auto",
-                 wear_lanes: int | str = "auto") -> None:
+                 wear_lanes: int | str = "auto", pair_evaluation: str = DEFAULT_PAIR_EVALUATION) -> None:
         self.model = model
         # what run() and settle() do when a world becomes unstable: "raise" (StabilityError) or
         # "freeze" (the world stays frozen and is listed, the others run on)
@@ -907,7 +955,8 @@ class Simulation:
                                 v_max=v_max, neighbour_search=neighbour_search, wall_stage=wall_stage,
                                 neighbour_layout=neighbour_layout, history_layout=history_layout,
                                 fused_placement=fused_placement, wall_candidates=wall_candidates,
-                                force_registers=force_registers, wear_lanes=wear_lanes)
+                                force_registers=force_registers, wear_lanes=wear_lanes,
+                                pair_evaluation=pair_evaluation)
         self.state = model.state()
         self._next = model.state()
         self.steps = 0

@@ -131,6 +131,13 @@ class SubModel:
     #: Sphere-sphere contacts lie at half the overlap either way. Read by
     #: :func:`warpdem.stages.wall_contacts.wall_stage_kernels`.
     wall_contact_at_half_overlap: ClassVar[bool] = False
+    #: sphere-sphere contacts: whether the evaluation from the partner's side (normal, relative
+    #: velocities and history negated, radii swapped) gives exactly the negated force and torque
+    #: (Newton's third law, with rolling torques -M on the partner). A law whose sub-models all say
+    #: so may evaluate each pair once on the CPU (``DEMSolver(pair_evaluation="half")``); False (the
+    #: safe default for a plug-in) keeps both sides. False for sub-models that read one side's
+    #: lever (``c.arm``, the body fields).
+    pair_antisymmetric: ClassVar[bool] = False
 
     def make(self, column: Callable[[str], int]) -> "wp.Function":
         """Return the ``wp.func`` implementing this sub-model.

@@ -100,6 +100,7 @@ class SimplifiedJKR(SubModel):
 
     kind = "cohesion"
     name = "sjkr"
+    pair_antisymmetric = True
     default_candidate = True
     cohesion_in_friction_limit = False
     parameters = (COHESION_ENERGY_DENSITY,)
@@ -123,6 +124,7 @@ class SimplifiedJKR2(SubModel):
 
     kind = "cohesion"
     name = "sjkr2"
+    pair_antisymmetric = True
     cohesion_in_friction_limit = False
     parameters = (COHESION_ENERGY_DENSITY,)
     reference = ("LIGGGHTS-PUBLIC 3.8 src/cohesion_model_sjkr2.h with its default tangential_reduce off (F = -k A, "

@@ -65,6 +65,7 @@ def restitution_beta(e: float):
 class HertzNormal(SubModel):
     kind = "normal"
     name = "hertz"
+    pair_antisymmetric = True
     parameters = (
         ParameterSpec("restitution", "-", 0.6, (0.01, 1.0), "coefficient of restitution e"),
     )
@@ -105,6 +106,7 @@ class HertzNormalLiggghtsWall(HertzNormal):
 class MindlinTangential(SubModel):
     kind = "tangential"
     name = "mindlin"
+    pair_antisymmetric = True
     parameters = (MU_S,)
     needs_history = True
     # This text enters every record's and DEM-cache key's fingerprint, so it stays as written when
@@ -146,6 +148,7 @@ class MindlinTangential(SubModel):
 class HistoryTangential(SubModel):
     kind = "tangential"
     name = "history"
+    pair_antisymmetric = True
     parameters = (MU_S,)
     needs_history = True
     reference = ("Mindlin & Deresiewicz (1953); seed paper eqs. (4)-(8); LIGGGHTS tangential history "

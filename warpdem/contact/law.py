@@ -165,6 +165,12 @@ class ContactLaw:
         (``arm_body``, ``w_body``, ``i_body``): a compile-time switch of the contact stages."""
         return any(bool(getattr(s, "needs_body_kinematics", False)) for s in self.submodels.values())
 
+    @property
+    def pair_antisymmetric(self) -> bool:
+        """Whether every sub-model's sphere-sphere force is antisymmetric (``SubModel.pair_antisymmetric``):
+        then a pair may be evaluated once, the partner getting the reaction (``pair_evaluation="half"``)."""
+        return all(bool(getattr(s, "pair_antisymmetric", False)) for s in self.submodels.values())
+
     def describe(self) -> str:
         """``hertz+mindlin+rolling:epsd+cohesion:none``; a non-default clump damping mass is
         appended (``+clump_damping:body``), so the default law's text is unchanged."""

@@ -10,6 +10,7 @@ from .base import ContactInput, SubModel, register
 class NoCohesion(SubModel):
     kind = "cohesion"
     name = "none"
+    pair_antisymmetric = True
     reference = "no cohesion"
 
     def make(self, column):
@@ -24,6 +25,7 @@ class NoCohesion(SubModel):
 class NoRolling(SubModel):
     kind = "rolling"
     name = "none"
+    pair_antisymmetric = True
     reference = "no rolling resistance"
 
     def make(self, column):
@@ -38,6 +40,7 @@ class NoRolling(SubModel):
 class FrictionlessTangential(SubModel):
     kind = "tangential"
     name = "none"
+    pair_antisymmetric = True
     reference = "frictionless contact"
 
     def make(self, column):

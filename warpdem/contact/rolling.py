@@ -155,6 +155,7 @@ class BodyArmCDT(SubModel):
 class LiggghtsCDT(SubModel):
     kind = "rolling"
     name = "cdt_liggghts"
+    pair_antisymmetric = True
     parameters = (MU_R,)
     reference = ("LIGGGHTS-PUBLIC 3.8 rolling_friction cdt (src/rolling_model_cdt.h): tau = -mu_r k_n delta R* "
                  "w_rel/|w_rel| without its normal component, k_n delta the elastic Hertz force; no guard")
@@ -180,6 +181,7 @@ class LiggghtsCDT(SubModel):
 class ElasticPlasticSpringDashpot(SubModel):
     kind = "rolling"
     name = "epsd"
+    pair_antisymmetric = True
     parameters = (MU_R,)
     needs_history = True
     reference = ("Ai et al. (2011) model C without viscous term: k_r = 2.25 k_n mu_r^2 R*^2 "
@@ -203,6 +205,7 @@ class ElasticPlasticSpringDashpot(SubModel):
 class LiggghtsEPSD2(SubModel):
     kind = "rolling"
     name = "epsd2"
+    pair_antisymmetric = True
     default_candidate = True
     parameters = (MU_R,)
     needs_history = True

@@ -21,6 +21,9 @@ with no edit. Forces: stage 2 writes the sum over a sphere's wall contacts, stag
 from it and adds the particle contacts in neighbour order, so every sphere's force is the
 same float sum, in the same order, as in one fused kernel (deterministic, no atomics; a
 per-stage output summed later would change the summation order and round differently).
+With ``pair_evaluation="half"`` (the CPU's default) stage 3 evaluates each pair once and adds the
+reaction to the partner (atomic adds, serial on the CPU): the sums start from
+``start_half_pair_sums`` and differ from the full evaluation by float rounding.
 Stages 1 and 2 are skipped without walls (``walls_on=False``, or a model without walls).
 With the solver's ``wall_stage="fused"`` they run as one kernel,
 ``collect_wall_contacts_and_forces`` (both stages of a sphere in one thread, same results).
@@ -34,12 +37,12 @@ import warp as wp
 
 from ..contact.law import ContactLaw
 from ..layouts import DEFAULT_SLOT_LAYOUT
-from .particle_contacts import particle_forces_kernel
+from .particle_contacts import PAIR_EVALUATIONS, check_half_row_slots, particle_forces_kernel, start_half_pair_sums
 from .structs import (CANDIDATES_OVERFLOW, CANDIDATES_UNSET, ContactHistory, ContactParameters, MovingWallCandidates,
                       NeighbourList, SphereForces, SphereSet, StepInputs, WallSet, WallSlots, WearAccumulators)
 from .wall_contacts import collect_wall_contacts_kernel, wall_stage_kernels
 
-__all__ = ["ContactStages", "contact_stages", "PackedInputs", "CANDIDATES_OVERFLOW", "CANDIDATES_UNSET",
+__all__ = ["ContactStages", "contact_stages", "PackedInputs", "PAIR_EVALUATIONS", "start_half_pair_sums", "check_half_row_slots", "CANDIDATES_OVERFLOW", "CANDIDATES_UNSET",
            "ContactHistory", "ContactParameters", "MovingWallCandidates", "NeighbourList",
            "SphereForces", "SphereSet", "StepInputs", "WallSet", "WallSlots", "WearAccumulators"]
 
@@ -72,11 +75,13 @@ class PackedInputs:
 
 @functools.lru_cache(maxsize=None)
 def contact_stages(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
-                   history_layout: str = DEFAULT_SLOT_LAYOUT, max_registers: int | None = None) -> ContactStages:
+                   history_layout: str = DEFAULT_SLOT_LAYOUT, max_registers: int | None = None,
+                   pairs: str = "full") -> ContactStages:
     """The stage kernels of ``law`` for the layouts of the neighbour list and of the contact
-    slots (:mod:`warpdem.layouts`) and the CUDA register cap of the force stages
-    (:mod:`.launch`; built once per combination and cached)."""
+    slots (:mod:`warpdem.layouts`), the CUDA register cap of the force stages (:mod:`.launch`)
+    and the pair evaluation of stage 3 (``"full"`` or ``"half"``, :func:`particle_forces_kernel`);
+    built once per combination and cached."""
     walls = wall_stage_kernels(law, history_layout, max_registers)
     return ContactStages(collect_wall_contacts_kernel(history_layout), walls.wall_forces,
-                         particle_forces_kernel(law, neighbour_layout, history_layout, max_registers),
+                         particle_forces_kernel(law, neighbour_layout, history_layout, max_registers, pairs),
                          walls.collect_wall_contacts_and_forces)

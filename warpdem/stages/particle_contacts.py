@@ -16,11 +16,15 @@ from .structs import ContactHistory, ContactParameters, NeighbourList, SphereFor
 
 wp.set_module_options({"enable_backward": False, "fast_math": True})
 
+#: how sphere-sphere pairs are evaluated: from both sides (each sphere writes only its own row and
+#: sums: no atomics, the GPU's choice) or once per pair with the reaction added to the partner
+PAIR_EVALUATIONS = ("full", "half")
+
 
 @functools.lru_cache(maxsize=None)
 def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT_LAYOUT,
                            history_layout: str = DEFAULT_SLOT_LAYOUT,
-                           max_registers: int | None = None) -> "wp.Kernel":
+                           max_registers: int | None = None, pairs: str = "full") -> "wp.Kernel":
     """Stage 3 of one contact law (built and cached per law, layouts of the neighbour list and
     the contact history, :mod:`warpdem.layouts`, and CUDA register cap, :mod:`.launch`), one
     thread per sphere.
@@ -38,7 +42,19 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
     neighbour order, to the sums of stage 2 (zero without wall contacts), so the result does
     not depend on the split into stages. Also the stage that finishes every sphere's row:
     inactive spheres get no contacts; a paused world keeps its history unchanged and feels no
-    force."""
+    force.
+
+    ``pairs="half"`` (the CPU's choice, :data:`PAIR_EVALUATIONS`): each pair is evaluated once,
+    by its higher-index sphere i (the list is sorted by index, so the walk stops at the first
+    j > i), which keeps the pair's history in its row and adds the reaction -F (and its torque,
+    with the rolling torque -M) to sphere j's sums with atomic adds. Valid for a law whose
+    sub-models are all ``pair_antisymmetric`` (:attr:`ContactLaw.pair_antisymmetric`). The sums
+    must start from :func:`start_half_pair_sums` (the wall stages' sums or zero). On the CPU the
+    threads run one after another, so the sums are deterministic; they differ from ``"full"``
+    by float rounding (the other side's evaluation is replaced by the exact negation)."""
+    if pairs not in PAIR_EVALUATIONS:
+        raise ValueError(f"pairs must be one of {PAIR_EVALUATIONS}, got {pairs!r}")
+    half = pairs == "half"
     evaluate = law_evaluator(law)
     damping_mass = damping_mass_function(law.clump_damping_mass)  # compiled in: mass_felt_at or whole_body_mass
     roll_hist = bool(law.needs_rolling_history)
@@ -88,12 +104,16 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
         t_sum = wp.vec3(0.0)
         if step.walls_on != 0:  # continue after the wall stages' contacts and sums
             n_new = found.count[i]
-            if n_new > 0:
-                f_sum = forces.force[i]
-                t_sum = forces.torque[i]
+            if not wp.static(half):  # half: start_half_pair_sums put them in the sums already
+                if n_new > 0:
+                    f_sum = forces.force[i]
+                    t_sum = forces.torque[i]
         nb_rows = neighbours.count.shape[0]
         for nb in range(neighbours.count[i]):
             j = neighbours.index[nb_entry(i, nb, nb_rows, neighbours.capacity)]
+            if wp.static(half):
+                if j > i:  # the row is sorted by index: the rest are evaluated by their own threads
+                    break
             other = spheres.view[j]
             rj = other.r
             if rj < 0.0:
@@ -150,6 +170,10 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
             force = fn * nrm + ft
             f_sum = f_sum + force
             t_sum = t_sum + wp.cross(cp - xb, force) + tr
+            if wp.static(half):  # the reaction on j at the same contact point
+                wp.atomic_add(forces.force, j, -force)
+                wp.atomic_add(forces.torque, j, wp.cross(cp - xbj, -force) - tr)
+                wp.atomic_add(forces.reactions, j, 1)
             e_new = slot(i, n_new, rows, slots)
             contacts.partner[e_new] = j
             contacts.spring[e_new] = spring_new
@@ -157,7 +181,36 @@ def particle_forces_kernel(law: ContactLaw, neighbour_layout: str = DEFAULT_SLOT
                 contacts.roll[e_new] = roll_new
             n_new += 1
         contacts.count[i] = n_new
-        forces.force[i] = f_sum
-        forces.torque[i] = t_sum
+        if wp.static(half):
+            wp.atomic_add(forces.force, i, f_sum)
+            wp.atomic_add(forces.torque, i, t_sum)
+        else:
+            forces.force[i] = f_sum
+            forces.torque[i] = t_sum
 
     return particle_forces
+
+
+@wp.kernel
+def check_half_row_slots(step: StepInputs, contacts: ContactHistory, forces: SphereForces):
+    """``pairs="half"``, after the particle stage: a sphere whose contacts (its row's entries plus
+    the pairs its higher-index partners keep) exceed the contact slots counts the excess into
+    ``step.overflow``, as the full evaluation would when its row overflows, so ``max_contacts``
+    means the same in both; the reaction counts are cleared for the next step."""
+    i = wp.tid()
+    extra = contacts.count[i] + forces.reactions[i] - contacts.slots
+    if extra > 0:
+        wp.atomic_add(step.overflow, 0, extra)
+    forces.reactions[i] = 0
+
+
+@wp.kernel
+def start_half_pair_sums(step: StepInputs, found: WallSlots, forces: SphereForces):
+    """``pairs="half"``: every sphere's force and torque sums start from its wall contacts' (the
+    wall stages' sums) or zero, before the particle stage adds to them from both sides of a pair."""
+    i = wp.tid()
+    if step.walls_on != 0:
+        if found.count[i] > 0:
+            return
+    forces.force[i] = wp.vec3(0.0)
+    forces.torque[i] = wp.vec3(0.0)

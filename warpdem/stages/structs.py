@@ -125,3 +125,6 @@ class SphereForces:
 
     force: wp.array(dtype=wp.vec3)
     torque: wp.array(dtype=wp.vec3)
+    #: ``pair_evaluation="half"``: contacts a sphere's row does not hold (pairs kept by a
+    #: higher-index partner), counted for the slot check; unused (one entry) with "full"
+    reactions: wp.array(dtype=int)
