@@ -20,7 +20,6 @@ import json
 import math
 import platform
 import re
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -33,14 +32,6 @@ from warpdem.config_io import positive_float_arg, positive_int_arg
 STEPS, WARMUP = 2000, 200
 DT = 5.0e-5
 SKIN = 0.3 * R
-
-
-def data_file(pos: np.ndarray, width: float, top: float) -> str:
-    """A LIGGGHTS ``read_data`` file of the spheres (atom_style granular: id type diameter density x y z)."""
-    lines = ["LIGGGHTS data file: settled-bed loose fill", "", f"{len(pos)} atoms", "2 atom types", "",
-             f"0 {width:.10g} xlo xhi", f"0 {width:.10g} ylo yhi", f"0 {top:.10g} zlo zhi", "", "Atoms", ""]
-    lines += [f"{i + 1} 1 {D:.10g} 2661 {x:.10g} {y:.10g} {z:.10g}" for i, (x, y, z) in enumerate(pos)]
-    return "\n".join(lines) + "\n"
 
 
 def deck(width: float, top: float, rolling: str, settle_time: float) -> str:
@@ -116,36 +107,28 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--settle-time", type=positive_float_arg, default=3.0, help="max simulated settling time [s]")
     ap.add_argument("--keep", default=None, help="run in this folder and keep it (default: a temporary one)")
     args = ap.parse_args(argv)
-    from validation.reference.liggghts import _require_executable, liggghts_version
+    from validation.reference.liggghts import LiggghtsFailed, run_deck
+    from validation.reference.liggghts_experiments import sphere_data_file
 
-    exe = _require_executable()
     width = 0.6 * max(1.0, math.sqrt(args.spheres / 20000.0))
     pos = loose_fill(args.spheres, width, np.random.default_rng(0))
     pos = pos[morton_order(pos, D)]
     top = float(pos[:, 2].max() + D)
-    folder = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="liggghts_bed_"))
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "bed.data").write_text(data_file(pos, width, top))
-    (folder / "in.bed").write_text(deck(width, top, args.rolling, args.settle_time))
-    cmd = [exe, "-in", "in.bed", "-log", "log.liggghts", "-screen", "none", "-nocite"]
-    if args.procs > 1:
-        cmd = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(args.procs), *cmd]
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=folder, capture_output=True, text=True, env={"OMP_NUM_THREADS": "1",
-                                                                                 "PATH": "/usr/bin:/bin"})
-    wall = time.perf_counter() - t0
-    log = (folder / "log.liggghts").read_text(errors="replace") if (folder / "log.liggghts").exists() else ""
-    if proc.returncode != 0 or "ERROR" in log:
-        tail = "\n".join((log or proc.stdout + proc.stderr).splitlines()[-15:])
-        raise SystemExit(f"LIGGGHTS failed in {folder} (rc {proc.returncode}):\n{tail}")
-    r = parse(log)
-    result = dict(case="settled-bed", code=liggghts_version(exe), host=platform.node(), spheres=args.spheres,
+    data = sphere_data_file(pos, np.full(len(pos), R), 2661.0, np.zeros(3), np.array([width, width, top]))
+    with tempfile.TemporaryDirectory(prefix="liggghts_bed_") as scratch:
+        try:
+            run = run_deck(deck(width, top, args.rolling, args.settle_time), Path(args.keep or scratch),
+                           {"bed.data": data}, processes=args.procs)
+        except LiggghtsFailed as e:
+            raise SystemExit(str(e)) from None
+    r = parse(run.log)
+    result = dict(case="settled-bed", code=run.version, host=platform.node(), spheres=args.spheres,
                   procs=r["procs"], rolling=args.rolling, walls="primitive planes", skin_m=SKIN, dt=DT,
                   steps=r["steps"], seconds=round(r["seconds"], 3),
                   sphere_steps_per_s=float(f"{args.spheres * r['steps'] / r['seconds']:.4g}"),
                   contacts_per_sphere=r["contacts_per_sphere"], settle_sim_time_s=(r["settle_steps"] or 0) * DT,
-                  ke_per_particle_J=r["ke_per_particle_J"], wall_s=round(wall, 1), date=time.strftime("%Y-%m-%d"),
-                  folder=str(folder) if args.keep else None)
+                  ke_per_particle_J=r["ke_per_particle_J"], wall_s=round(run.wall_s, 1), date=time.strftime("%Y-%m-%d"),
+                  folder=args.keep)
     print(json.dumps(result), flush=True)
     return result
 

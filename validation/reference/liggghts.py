@@ -82,10 +82,11 @@ class LiggghtsRun:
 
 def run_deck(deck: str, folder: str | os.PathLike, files: dict[str, str | bytes] | None = None,
              timeout_s: float = 3600.0, executable: str | None = None, *,
-             screen_file: str | None = None) -> LiggghtsRun:
+             screen_file: str | None = None, processes: int = 1) -> LiggghtsRun:
     """Write ``deck`` (and ``files``: name -> text or bytes, e.g. STL meshes) into ``folder`` and
-    run LIGGGHTS there on one process. Raises :class:`LiggghtsFailed` with the log's tail when
-    the run reports an error or exits non-zero.
+    run LIGGGHTS there on ``processes`` MPI processes (``mpirun -np``; 1: no MPI launcher), one
+    thread each. Raises :class:`LiggghtsFailed` with the log's tail when the run reports an error
+    or exits non-zero.
 
     screen_file: write the screen output to this file in ``folder`` (None: no screen output).
     Decks with ``fix mesh/surface`` need one: LIGGGHTS 3.8 prints the mesh import to the screen
@@ -102,8 +103,10 @@ def run_deck(deck: str, folder: str | os.PathLike, files: dict[str, str | bytes]
             target.write_text(content)
     (folder / "in.deck").write_text(deck)
     t0 = time.perf_counter()
-    proc = subprocess.run([exe, "-in", "in.deck", "-log", "log.liggghts", "-screen", screen_file or "none", "-nocite"],
-                          cwd=folder, capture_output=True, text=True, timeout=timeout_s,
+    command = [exe, "-in", "in.deck", "-log", "log.liggghts", "-screen", screen_file or "none", "-nocite"]
+    if processes > 1:
+        command = ["mpirun", "--allow-run-as-root", "--oversubscribe", "-np", str(int(processes)), *command]
+    proc = subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=timeout_s,
                           env={**os.environ, "OMP_NUM_THREADS": "1"})
     wall = time.perf_counter() - t0
     log_path = folder / "log.liggghts"

@@ -54,7 +54,7 @@ from calibration.materials import equal_number_size_classes
 
 __all__ = ["CapturedWall", "WallRecorder", "capture_walls", "stl_text", "LAW_MAP", "liggghts_model_keywords",
            "contact_parameter_table", "fill_for_index", "warpdem_time_step", "ExperimentDeck", "write_deck",
-           "FILL_MODES", "DUMP_COLUMNS", "UnsupportedLaw"]
+           "FILL_MODES", "DUMP_COLUMNS", "UnsupportedLaw", "sphere_data_file"]
 
 #: fill modes: the project's own fill, or LIGGGHTS' own insertion (module docstring)
 FILL_MODES = ("identical", "poured")
@@ -529,7 +529,7 @@ def write_deck(exp: Experiment, parameters: Mapping[str, float], fill_mode: str 
         r = fill.sample.radius
         if np.any(x - r[:, None] < dom_lo) or np.any(x + r[:, None] > dom_hi):
             raise ValueError(f"{exp.name}: the fill does not lie inside the LIGGGHTS domain {box_line}")
-        files["fill.data"] = _data_file(x, r, material.particle.density, dom_lo, dom_hi)
+        files["fill.data"] = sphere_data_file(x, r, material.particle.density, dom_lo, dom_hi)
         d.add("read_data fill.data")
     else:
         d.add(f"region domain block {box_line} units box", "create_box 2 domain")
@@ -634,9 +634,11 @@ def _protocol_duration(exp: Experiment, rpm: float | None, loose_top: float) -> 
     return 0.0
 
 
-def _data_file(x: np.ndarray, r: np.ndarray, density: float, lo: np.ndarray, hi: np.ndarray) -> str:
-    """``read_data`` file of spheres (atom_style granular: id type diameter density x y z)."""
-    out = ["LIGGGHTS data file: warpdem fill (identical mode)", "", f"{len(x)} atoms", "2 atom types", "",
+def sphere_data_file(x: np.ndarray, r: np.ndarray, density: float, lo: np.ndarray, hi: np.ndarray) -> str:
+    """``read_data`` file of spheres at ``x`` [m] of radii ``r`` [m] and ``density`` [kg/m^3] in the
+    box ``lo``..``hi`` [m] (atom_style granular: id type diameter density x y z; 2 atom types,
+    the particles of type 1)."""
+    out = ["LIGGGHTS data file: warpdem spheres", "", f"{len(x)} atoms", "2 atom types", "",
            f"{lo[0]:.10g} {hi[0]:.10g} xlo xhi", f"{lo[1]:.10g} {hi[1]:.10g} ylo yhi", f"{lo[2]:.10g} {hi[2]:.10g} zlo zhi",
            "", "Atoms", ""]
     out += [f"{i + 1} {PARTICLE_TYPE} {2.0 * ri:.15g} {density:.10g} {p[0]:.15g} {p[1]:.15g} {p[2]:.15g}"
