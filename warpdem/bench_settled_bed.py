@@ -35,8 +35,9 @@ from warpdem import geometry
 from warpdem.config_io import (check_output_folder, check_sphere_memory, device_arg, existing_file_arg,
                                nonnegative_int_arg, positive_float_arg, positive_int_arg)
 from warpdem.solver import (DEFAULT_FUSED_PLACEMENT, DEFAULT_HISTORY_LAYOUT, DEFAULT_NEIGHBOUR_LAYOUT,
-                            DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_WALL_CANDIDATES, DEFAULT_WALL_STAGE,
-                            NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+                            DEFAULT_NEIGHBOUR_SEARCH, DEFAULT_PAIR_EVALUATION, DEFAULT_WALL_CANDIDATES,
+                            DEFAULT_WALL_STAGE, NEIGHBOUR_SEARCHES, SLOT_LAYOUTS, WALL_STAGES)
+from warpdem.stages import PAIR_EVALUATIONS
 
 D = 0.018
 R = D / 2
@@ -75,7 +76,7 @@ def add_solver_options(ap: argparse.ArgumentParser) -> None:
                     help="CUDA register cap per thread of the wall- and particle-force kernels: an integer, 'none' "
                          "(the compiler's choice) or 'auto' (default: 80 for models of more than 2 x SMs x 512 "
                          "spheres)")
-    ap.add_argument("--pair-evaluation", default="auto", choices=["auto", "full", "half"],
+    ap.add_argument("--pair-evaluation", default=DEFAULT_PAIR_EVALUATION, choices=["auto", *PAIR_EVALUATIONS],
                     help="sphere pairs evaluated from both sides or once with the reaction added to the partner "
                          "(default auto: half on the CPU where the law allows it, full on a GPU)")
     ap.add_argument("--wear-lanes", type=option_value, default="auto",

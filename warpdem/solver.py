@@ -77,12 +77,11 @@ def resolve_pair_evaluation(on_gpu: bool, law, pair_evaluation: str = "auto") ->
     when the law allows it (:attr:`ContactLaw.pair_antisymmetric`), else ``"full"``. ``"half"`` is
     refused on a GPU (its per-sphere rows without atomics keep results bitwise reproducible there)
     and for a law that does not allow it."""
-    from .stages import PAIR_EVALUATIONS
-
     if pair_evaluation == "auto":
         return "half" if (not on_gpu and law.pair_antisymmetric) else "full"
-    if pair_evaluation not in PAIR_EVALUATIONS:
-        raise ConfigError(f"pair_evaluation must be one of {PAIR_EVALUATIONS + ('auto',)}, got {pair_evaluation!r}")
+    if pair_evaluation not in stages.PAIR_EVALUATIONS:
+        raise ConfigError(f"pair_evaluation must be one of {stages.PAIR_EVALUATIONS + ('auto',)}, "
+                          f"got {pair_evaluation!r}")
     if pair_evaluation == "half" and on_gpu:
         raise ConfigError("pair_evaluation='half' runs on the CPU only (on a GPU every sphere sums its own row: "
                           "no atomics, bitwise reproducible); use 'full' or 'auto'")
