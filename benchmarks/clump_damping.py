@@ -11,7 +11,7 @@ rpm with the paired difference body - contact_point.
     python benchmarks/clump_damping.py --scale quick --device cpu --rpms 45 15 --fills 3 | grep '^{'
 
 (worker processes print Warp's start-up lines on stdout; ``grep '^{'`` keeps the JSON.)
-Measured: benchmarks/RESULTS.md, "Clump contact damping" (about 19 min on 2 shared CPU cores).
+Measured: docs/notes/physical_effects.md, "Clump contact damping" (about 19 min on 2 shared CPU cores).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The README's main job, `warpdem diagnose validation/configs/first_diagnosis.yaml`: its files load
 and say nothing of the hidden effect (fast), and on the 2-core CPU it finds rolling resistance
-(slow: about 8-11 min; benchmarks/RESULTS.md, "The README's first diagnosis")."""
+(slow: about 8-11 min; docs/notes/diagnosis_hidden_effects.md, "The README's first diagnosis")."""
 from __future__ import annotations
 
 import json

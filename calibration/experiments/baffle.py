@@ -41,7 +41,7 @@ class BaffleBox(Experiment):
     height of the heap outside the baffle, only about 4 particle diameters of 24-30 mm spheres
     at 16 kg, so one pile's angle (and the camera view of it) scattered by 3.4 deg between loose
     fills; at 28 kg the slope spans ~7 diameters and the scatter is 1.6 deg, and the image and
-    profile angles of 14 of 16 piles agree within 1 deg (7 of 16 at 16 kg; benchmarks/RESULTS.md,
+    profile angles of 14 of 16 piles agree within 1 deg (7 of 16 at 16 kg; docs/notes/experiments_timing.md,
     "Camera view against particle profile").
     """
 
