@@ -6,7 +6,7 @@ with the compiler's own register choice and with register caps (``DEMSolver(forc
 Each law runs a tiny two-world drum scene (tests/test_contact_stages.py's) for a few steps on CUDA so
 that its kernels are compiled and loaded, then :func:`warpdem.bench_settled_bed.kernel_resources`
 reads the CUDA driver's figures. A cap that makes a kernel spill (``local_bytes`` > 0) costs time:
-the settled bed at a cap of 64 spilled 80 B per thread and ran 5 % slower (benchmarks/RESULTS.md).
+the settled bed at a cap of 64 spilled 80 B per thread and ran 5 % slower (docs/notes/engine_speed.md).
 """
 from __future__ import annotations
 

@@ -29,7 +29,7 @@ Variants (:data:`VARIANTS`; each a small dict of overrides; the hypothesis it te
   5-8 spheres per clump instead of 22-25). Angularity: fewer, less overlapping spheres make bumpier
   clumps that interlock. Over the 40 points EDEM's static angle follows sliding friction 2.6 x more
   steeply than ours and hardly depends on rolling friction, while ours follows both about equally
-  (benchmarks/RESULTS.md): our clumps roll where the scanned gravel interlocks.
+  (docs/notes/seed_paper_reproduction.md): our clumps roll where the scanned gravel interlocks.
 - ``cdt_liggghts``: LIGGGHTS' cdt rolling resistance (elastic force, lever R*) instead of EDEM's
   (total force, lever R_i ~ 2 R* between equal spheres). Rolling convention: half the lever, so
   this should lower the angles; the size of that drop is the sensitivity to the convention.

@@ -80,15 +80,15 @@ CALIBRATION_TARGET_DEG = 1.5
 #: first loose-fill index of the DEM runs at the paper's optimum when fills are independent (the
 #: campaign's design, targets, confirmation and validation use indices below 4,000,000)
 PAPER_OPTIMUM_FILLS = 4_000_000
-#: DEM cost per sample [s] when this folder holds no record yet: benchmarks/RESULTS.md, paper-scale
+#: DEM cost per sample [s] when this folder holds no record yet: docs/notes/calibration_campaigns.md, paper-scale
 #: gravel clump campaign on an NVIDIA H200 (2026-11-27), batches of 8 worlds
 BENCHMARK_SECONDS_PER_SAMPLE = {"baffle": 12.1, "drum": 48.2}
-#: DEM wall time of one world [s], the least any batch costs: benchmarks/RESULTS.md, paper-scale
+#: DEM wall time of one world [s], the least any batch costs: docs/notes/calibration_campaigns.md, paper-scale
 #: gravel clumps, one world on an NVIDIA H100 (2026-11-22; the drum's full 15-revolution protocol)
 BENCHMARK_ONE_WORLD_SECONDS = {"baffle": 34.0, "drum": 252.0, "cylinder": 161.0}
 #: CPU time the analysis may take before its first DEM run (surrogate cross-validation, NSGA-II at
 #: Table 8's size, Sobol at n = 16384): a time-limited part starts it only with this much left [s]
-#: (the paper-data example with the same steps: 34-88 s on a busy 2-core VM, benchmarks/RESULTS.md)
+#: (the paper-data example with the same steps: 34-88 s on a busy 2-core VM, docs/notes/memory.md)
 ANALYSIS_SECONDS = 120.0
 #: the paper's Table 6 (and Table 5's density): particle and wall properties, and its time step
 PAPER_TABLE6 = {"particle density (kg/m3)": 2661.0, "particle Young's modulus (Pa)": 1.0e7,
@@ -711,7 +711,7 @@ def reproduction_report(cfg: cp.CampaignConfig, points: PaperPoints, ours_deg: n
         *([Table(["experiment", "samples run", "DEM time (s)", "per sample (s)", "samples left", "estimated left (min)"],
                  [[k, v["run"], v["dem_s"], v["per_sample_s"], v["left"], v["left_min"]] for k, v in cost.items()],
                  caption="DEM time from this folder's records (per sample: their mean; without records: "
-                         "benchmarks/RESULTS.md's H200 figures, baffle 12.1 s and drum 48.2 s per sample in "
+                         "docs/notes/calibration_campaigns.md's H200 figures, baffle 12.1 s and drum 48.2 s per sample in "
                          "batches of 8).")] if cost else [])]))
     table_rows = []
     for k in range(len(points)):

@@ -224,7 +224,7 @@ def test_quick_config_recovers_dem_targets(tmp_path):
     """Issue 5 end to end on the CPU: the README's main job (quick_calibration.yaml: 14 samples, a
     new loose fill for every world, targets and confirmations averaged over 5 fills, one process per
     core, 6.5-9 min on 2 cores) matches DEM-produced targets within 1.5 deg at the compromise, with
-    the true parameters in the acceptable set (runs with four design/fill seeds: benchmarks/RESULTS.md).
+    the true parameters in the acceptable set (runs with four design/fill seeds: docs/notes/calibration_campaigns.md).
     The check is statistical: the confirmation and the target each carry ~0.7 deg (static) and ~0.6 deg
     (dynamic) of fill noise."""
     cfg = cp.load_config(Path(__file__).parents[1] / "calibration" / "configs" / "quick_calibration.yaml")

@@ -4,7 +4,7 @@ pipeline) and the particle-profile measurement (spec A) give the same angle with
 The two are different estimators of one slope (every pixel column of the silhouette against the
 highest particle top per bin), so they agree to the extent the slope is resolved by particles:
 the quick preset's 28 kg fill spans ~7 diameters (14 of 16 piles within 1 deg, mean |diff| 0.5 deg,
-against 7 of 16 at 16 kg; benchmarks/RESULTS.md), 8-10 mm spheres at paper scale 8/8 within 0.45 deg
+against 7 of 16 at 16 kg; docs/notes/experiments_timing.md), 8-10 mm spheres at paper scale 8/8 within 0.45 deg
 (GPU benchmark)."""
 import numpy as np
 import pytest

@@ -10,7 +10,7 @@ on CUDA, bit for bit.
 
 ``"auto"`` (the solver's default) caps at :data:`OCCUPANCY_REGISTER_CAP` only where the occupancy
 can pay: when the model has more spheres than twice the threads the GPU keeps resident at the
-compiler's choice (16 warps of 32 threads per SM). Measured on an H100 (benchmarks/RESULTS.md,
+compiler's choice (16 warps of 32 threads per SM). Measured on an H100 (docs/notes/engine_speed.md,
 2026-11-27): a settled bed of 1e6 spheres 1.154 -> 1.074 ms per step (+7.4 %), 200k spheres in
 drum worlds -3.5 %, but 20k spheres +2 % and the 64-world paper-scale batches (52k-124k spheres)
 +2-3 % (every thread is resident anyway; fewer registers cost instructions).
