@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy import stats
 
 from calibration.designs import Parameter, ParameterSpace
@@ -115,3 +116,31 @@ def test_the_rule_rarely_fires_on_noise_that_is_the_same_everywhere():
     # and it has power where a point really scatters 5x more (the paper-scale case)
     noisy = local_noise((5 * fills[:, :2]).std(axis=1, ddof=1), np.full(n, 2), pooled, np.full(n, 10))
     assert noisy.mean() > 0.3
+
+
+class StaticAngleUnmeasurableWithCohesion(AnalyticGranularModel):
+    """With cohesion the baffle's static angle cannot be measured in every fill but the first (the
+    material stands: no slope in the measurement window), as 21 of 24 cohesive pair worlds of the
+    README's main job did on 2026-11-28: no set of that version has two successful fills."""
+
+    def evaluate(self, effects, parameter_sets, replicates, keys):
+        out = super().evaluate(effects, parameter_sets, replicates, keys)
+        if "cohesion" in effects and "baffle/static_angle" in keys:
+            out[:, 1:, list(keys).index("baffle/static_angle")] = np.nan
+        return out
+
+
+def test_a_version_whose_replicates_all_fail_on_an_observable_keeps_the_base_noise_there():
+    from validation.design import NoiseNotMeasurable
+
+    obs = Observations(lab_observables(TRUTHS["cohesion"], ("cohesion",)))
+    runner = ForwardRunner(StaticAngleUnmeasurableWithCohesion(3))
+    base = study_model(ModelVersion(BASE), obs, runner, FAST, seed=1)
+    cohesive = ModelVersion(BASE).with_effect(COHESION)
+    static = KEYS.index("baffle/static_angle")
+    study = study_model(cohesive, obs, runner, FAST, seed=2, noise=(base.noise_sd, base.noise_dof))
+    assert study.noise_source[static] == "base" and study.noise_sd[static] == base.noise_sd[static] > 0
+    assert np.all(np.isfinite(study.noise_sd))
+    # without a base estimate to fall back on it is the user-facing error it always was
+    with pytest.raises(NoiseNotMeasurable, match="baffle/static_angle"):
+        study_model(cohesive, obs, runner, FAST, seed=2)

@@ -111,17 +111,19 @@ def design_size(version: ModelVersion, settings: DiagnosisSettings) -> int:
     return max(settings.min_design_points, settings.design_points_per_parameter * version.space.dim)
 
 
-def pooled_noise_sd(Y: np.ndarray, keys: Sequence[str] = ()) -> tuple[np.ndarray, np.ndarray]:
+def pooled_noise_sd(Y: np.ndarray, keys: Sequence[str] = (), require: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Pooled fill-to-fill standard deviation per observable and its degrees of freedom.
 
     Y : (n_sets, replicates, m), NaN ignored.  Returns ``(sd (m,), dof (m,))``; an observable whose
     replicates are identical in every set gets sd 0 and dof 0.
-    Raises :class:`NoiseNotMeasurable` if an observable has no set with two successful replicates.
+    An observable with no set of two successful replicates: :class:`NoiseNotMeasurable` with
+    ``require``, else sd NaN and dof 0 (for a caller that has another estimate to fall back on).
     """
     Y = np.asarray(Y, float)
     ok = np.isfinite(Y)
     n_k = ok.sum(axis=1)  # (n, m)
-    if np.any(np.all(n_k < 2, axis=0)):
+    unmeasured = np.all(n_k < 2, axis=0)
+    if require and np.any(unmeasured):
         bad = [keys[j] if j < len(keys) else str(j) for j in np.flatnonzero(np.all(n_k < 2, axis=0))]
         raise NoiseNotMeasurable(f"cannot measure the DEM fill-to-fill noise of {bad}: no parameter set has two successful "
                          "replicates (use replicates >= 2; with diagnosis.replicated_fraction below 1, a larger "
@@ -134,4 +136,4 @@ def pooled_noise_sd(Y: np.ndarray, keys: Sequence[str] = ()) -> tuple[np.ndarray
     ss = np.sum(np.where(varying, np.nansum(np.where(ok, (Y - mean_k) ** 2, 0.0), axis=1), 0.0), axis=0)
     dof = np.sum(np.where(varying, n_k - 1, 0), axis=0).astype(float)
     sd = np.sqrt(np.divide(ss, dof, out=np.zeros_like(ss), where=dof > 0))
-    return sd, dof
+    return np.where(unmeasured, np.nan, sd), dof

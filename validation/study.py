@@ -401,10 +401,14 @@ def study_model(version: ModelVersion, observations: Observations, runner: Forwa
     if design is None:
         design = run_design(version, runner, keys, design_size(version, settings), settings.replicates, seed,
                             settings.replicated_fraction)
-    noise_sd, noise_dof = pooled_noise_sd(design.Y, keys)
+    # with the base's noise to fall back on, an observable whose replicates all failed here (e.g. a
+    # pile too steep to measure over most of this version's box) takes the base's (version_noise)
+    noise_sd, noise_dof = pooled_noise_sd(design.Y, keys, require=noise is None)
     noise_source = ("own",) * len(keys)
     if noise is not None:
         noise_sd, noise_dof, noise_source = version_noise(noise_sd, noise_dof, *noise)
+        if np.any(np.isnan(noise_sd)):
+            pooled_noise_sd(design.Y, keys)  # neither measured: the same NoiseNotMeasurable as without a base
     misfit = Misfit.build(observations, noise_sd, settings.model_discrepancy, noise_dof)
     surrogates = fit_surrogates(space, design, noise_sd, settings.gp_restarts, settings.cv_folds, seed)
     scan = scan_box(surrogates, misfit, settings.scan_points, seed)
